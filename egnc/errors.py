@@ -1,0 +1,33 @@
+"""Exception hierarchy: every error egnc raises on purpose is an `EgncError`.
+
+The CLI turns any `EgncError` into a one-line message and exit code 1, so each message must
+stand alone on one line and name what the user has to fix (file and line where there is one).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class EgncError(Exception):
+    """Base class of all errors raised deliberately by egnc."""
+
+
+class G2oFormatError(EgncError):
+    """A pose-graph file could not be read: names the file and, where known, the 1-based line."""
+
+    def __init__(self, message: str, path: str | Path | None = None, line: int | None = None):
+        self.path = None if path is None else str(path)
+        self.line = line
+        where = ""
+        if self.path is not None:
+            where = f"{self.path}:{line}: " if line is not None else f"{self.path}: "
+        super().__init__(f"{where}{message}")
+
+
+class GraphError(EgncError):
+    """The pose graph is well formed but cannot be solved as given (e.g. disconnected)."""
+
+
+class SolverError(EgncError):
+    """The solver could not proceed (e.g. the linear system is singular)."""
