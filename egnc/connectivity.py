@@ -1,0 +1,103 @@
+"""Connected components of a pose graph, and the check that it is connected.
+
+A disconnected pose graph has no unique solution (each component floats freely), so it must be
+reported before solving rather than silently solved. Components come from
+`scipy.sparse.csgraph.connected_components`, so no Python loop runs over poses or edges.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+
+from egnc.errors import GraphError
+
+_MAX_COMPONENTS_SHOWN = 3
+_MAX_RUNS_SHOWN = 3
+
+
+def adjacency(num_poses: int, edges: np.ndarray) -> scipy.sparse.csr_array:
+    """Return the `(N, N)` sparse adjacency pattern of the edges (direction, multiplicity ignored).
+
+    Args:
+        num_poses: number of poses N.
+        edges: `(E, 2)` int row indices `(i, j)`.
+    """
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    ones = np.ones(len(edges), dtype=np.int8)
+    return scipy.sparse.csr_array((ones, (edges[:, 0], edges[:, 1])), shape=(num_poses, num_poses))
+
+
+def connected_components(num_poses: int, edges: np.ndarray) -> tuple[int, np.ndarray]:
+    """Label the connected components of the undirected graph.
+
+    Args:
+        num_poses: number of poses N.
+        edges: `(E, 2)` int row indices `(i, j)`.
+
+    Returns:
+        `(count, labels)`: the number of components and `(N,)` int labels in `[0, count)`.
+        Labels are numbered in order of each component's lowest row, so the component holding
+        row 0 is label 0.
+    """
+    count, labels = scipy.sparse.csgraph.connected_components(
+        adjacency(num_poses, edges), directed=False
+    )
+    # SciPy does not document its label order; renumber by each component's lowest row.
+    lowest_row = np.full(count, num_poses, dtype=np.int64)
+    np.minimum.at(lowest_row, labels, np.arange(num_poses))
+    rank = np.empty(count, dtype=np.int64)
+    rank[np.argsort(lowest_row)] = np.arange(count)
+    return int(count), rank[labels]
+
+
+def describe_components(vertex_ids: np.ndarray, labels: np.ndarray) -> str:
+    """Summarize components on one line, e.g. `{0..99} (100 poses), {100..149} (50 poses), ...`.
+
+    Args:
+        vertex_ids: `(N,)` sorted vertex ids.
+        labels: `(N,)` component labels from `connected_components`.
+    """
+    vertex_ids = np.asarray(vertex_ids)
+    count = int(labels.max()) + 1 if len(labels) else 0
+    parts = []
+    for label in range(min(count, _MAX_COMPONENTS_SHOWN)):
+        ids = vertex_ids[labels == label]
+        parts.append(f"{_format_id_runs(ids)} ({len(ids)} pose{'s' if len(ids) != 1 else ''})")
+    if count > _MAX_COMPONENTS_SHOWN:
+        parts.append(f"... ({count - _MAX_COMPONENTS_SHOWN} more)")
+    return ", ".join(parts)
+
+
+def require_connected(vertex_ids: np.ndarray, edges: np.ndarray, *, source: str = "") -> None:
+    """Raise `GraphError` unless the edges connect every pose.
+
+    Args:
+        vertex_ids: `(N,)` sorted vertex ids, used only to name poses in the message.
+        edges: `(E, 2)` int row indices `(i, j)` into `vertex_ids`.
+        source: where the graph came from (e.g. a file name), prefixed to the message.
+    """
+    count, labels = connected_components(len(vertex_ids), edges)
+    if count <= 1:
+        return
+    prefix = f"{source}: " if source else ""
+    raise GraphError(
+        f"{prefix}the pose graph is disconnected, {count} connected components: "
+        f"{describe_components(vertex_ids, labels)}; "
+        "every pose must be linked to the others by edges"
+    )
+
+
+def _format_id_runs(ids: np.ndarray) -> str:
+    """Format sorted ids as runs of consecutive values: `{0..9, 12, 20..29, ...}`."""
+    breaks = np.flatnonzero(np.diff(ids) != 1) + 1
+    starts = np.concatenate(([0], breaks))
+    ends = np.concatenate((breaks, [len(ids)])) - 1
+    runs = [
+        f"{ids[s]}" if s == e else f"{ids[s]}..{ids[e]}"
+        for s, e in zip(starts[:_MAX_RUNS_SHOWN], ends[:_MAX_RUNS_SHOWN])
+    ]
+    if len(starts) > _MAX_RUNS_SHOWN:
+        runs.append("...")
+    return "{" + ", ".join(runs) + "}"
