@@ -1,0 +1,445 @@
+"""Read and write pose graphs in the g2o text format.
+
+One record per line, fields separated by whitespace; blank lines and `#` comments are ignored:
+
+- `VERTEX_SE2 id x y theta`
+- `EDGE_SE2 i j dx dy dtheta` + 6 information entries
+- `VERTEX_SE3:QUAT id x y z qx qy qz qw`
+- `EDGE_SE3:QUAT i j dx dy dz qx qy qz qw` + 21 information entries
+- `FIX id [id ...]`
+
+Information matrices are given as their upper triangle, row-major, ordered translation-then-rotation
+(`x y theta` in 2D, `x y z rx ry rz` in 3D). Values are stored exactly as read: angles are not
+wrapped and quaternions are not normalized (that happens when converting to matrices).
+
+Reading validates everything before building arrays, so a bad file gives a one-line
+`G2oFormatError` naming the file and 1-based line, never a NumPy traceback. Poses without a VERTEX
+line get their initial guess from `egnc.initialize`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import secrets
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+import numpy as np
+
+from egnc.connectivity import require_connected
+from egnc.errors import G2oFormatError, GraphError
+from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.initialize import initialize_poses
+
+_MIN_QUATERNION_NORM = 1e-6
+"""Quaternions shorter than this are treated as corrupt rather than normalized."""
+
+_INT64_MAX = np.iinfo(np.int64).max
+
+
+@dataclass(frozen=True)
+class _Tag:
+    """The fixed layout of one g2o record type."""
+
+    name: str
+    kind: str  # "vertex" or "edge"
+    dim: int
+    num_ids: int
+    num_values: int
+    layout: str
+
+    @property
+    def num_fields(self) -> int:
+        """Fields after the tag."""
+        return self.num_ids + self.num_values
+
+
+_VERTEX_TAGS = {
+    2: _Tag("VERTEX_SE2", "vertex", 2, 1, 3, "id x y theta"),
+    3: _Tag("VERTEX_SE3:QUAT", "vertex", 3, 1, 7, "id x y z qx qy qz qw"),
+}
+_EDGE_TAGS = {
+    2: _Tag("EDGE_SE2", "edge", 2, 2, 3 + 6, "i j dx dy dtheta and 6 information entries"),
+    3: _Tag(
+        "EDGE_SE3:QUAT", "edge", 3, 2, 7 + 21, "i j dx dy dz qx qy qz qw and 21 information entries"
+    ),
+}
+_TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values())}
+_FIX = "FIX"
+
+
+@dataclass
+class _Records:
+    """Raw fields of one record type, in file order."""
+
+    rows: list[list[str]]
+    lines: list[int]
+
+
+class _Context:
+    """What error messages need to know about the file being read."""
+
+    def __init__(self, path: Path, text: str, num_lines: int):
+        self.path = path
+        # A last line without a newline that fails to parse was most likely cut short.
+        self.cut_line = num_lines if text and not text.endswith("\n") else None
+
+    def error(self, message: str, line: int | None = None) -> G2oFormatError:
+        """Build the error to raise, flagging a probably truncated last line."""
+        if line is not None and line == self.cut_line:
+            message = f"file looks truncated (last line has no newline): {message}"
+        return G2oFormatError(message, self.path, line)
+
+
+def read_g2o(path: str | os.PathLike, *, skip_unknown: bool = False) -> PoseGraph:
+    """Read a 2D or 3D g2o file into a `PoseGraph`.
+
+    Args:
+        path: the `.g2o` file.
+        skip_unknown: ignore lines with tags other than the ones above (landmarks, parameters,
+            ...) instead of raising.
+
+    Returns:
+        The graph, vertex ids sorted ascending, edges in file order. Vertices referenced by edges
+        but without a VERTEX line get their pose from `egnc.initialize.initialize_poses`.
+
+    Raises:
+        G2oFormatError: the file cannot be read or is malformed; names the file and line.
+        GraphError: the file is well formed but its graph is disconnected.
+    """
+    path = Path(path)
+    text = _read_text(path)
+    lines = text.split("\n")
+    context = _Context(path, text, len(lines))
+    dim, vertices, edges, fixes = _split_records(lines, context, skip_unknown)
+    if dim is None or not edges.rows:
+        raise context.error("no EDGE_SE2 or EDGE_SE3:QUAT lines: a pose graph needs edges")
+
+    vertex_tag, edge_tag = _VERTEX_TAGS[dim], _EDGE_TAGS[dim]
+    vertex_ids, vertex_values = _to_arrays(vertices, vertex_tag, context)
+    edge_ids, edge_values = _to_arrays(edges, edge_tag, context)
+    vertex_ids = vertex_ids[:, 0]
+    vertex_lines = np.asarray(vertices.lines, dtype=np.int64)
+    edge_lines = np.asarray(edges.lines, dtype=np.int64)
+    p, d = POSE_SIZE[dim], TANGENT_SIZE[dim]
+    measurements = edge_values[:, :p]
+    information = _information_from_upper(edge_values[:, p:], d)
+
+    _check_finite(vertex_values, vertex_lines, vertex_tag, 1 + vertex_tag.num_ids, context)
+    _check_finite(edge_values, edge_lines, edge_tag, 1 + edge_tag.num_ids, context)
+    if dim == 3:
+        _check_quaternions(vertex_values[:, 3:7], vertex_lines, context)
+        _check_quaternions(measurements[:, 3:7], edge_lines, context)
+    _check_unique_vertices(vertex_ids, vertex_lines, context)
+    _check_no_self_edges(edge_ids, edge_lines, context)
+    _check_positive_definite(information, edge_lines, context)
+
+    all_ids = np.unique(np.concatenate((vertex_ids, edge_ids.ravel())))
+    fixed = _fixed_mask(fixes, all_ids, context)
+    edge_rows = np.searchsorted(all_ids, edge_ids)
+    require_connected(all_ids, edge_rows, source=str(path))
+
+    poses = np.zeros((len(all_ids), p))
+    known = np.zeros(len(all_ids), dtype=bool)
+    vertex_rows = np.searchsorted(all_ids, vertex_ids)
+    poses[vertex_rows] = vertex_values
+    known[vertex_rows] = True
+    if not known.all():
+        poses = initialize_poses(dim, edge_rows, measurements, poses=poses, known=known)
+
+    return PoseGraph(
+        dim=dim,
+        vertex_ids=all_ids,
+        poses=poses,
+        edges=edge_rows,
+        measurements=measurements,
+        information=information,
+        fixed=fixed,
+        edge_lines=edge_lines,
+    )
+
+
+def write_g2o(
+    graph: PoseGraph, path: str | os.PathLike, *, keep_edges: np.ndarray | None = None
+) -> None:
+    """Write a graph as g2o text, atomically: the file is complete or untouched.
+
+    Vertices are written in id order, then FIX lines, then edges in graph order. Floats are written
+    with `repr`, so reading the file back gives bit-identical arrays. Only the upper triangle of
+    each information matrix is written (the g2o convention).
+
+    Args:
+        graph: the graph to write.
+        path: the output file; replaced only once the new content is fully written.
+        keep_edges: optional `(E,)` bool mask of the edges to write (e.g. to drop outliers); all
+            vertices are written regardless.
+
+    Raises:
+        ValueError: `keep_edges` is not an `(E,)` boolean mask.
+        GraphError: the graph holds non-finite values, which no reader would accept.
+    """
+    keep = np.ones(graph.num_edges, dtype=bool) if keep_edges is None else np.asarray(keep_edges)
+    if keep.dtype != bool or keep.shape != (graph.num_edges,):
+        raise ValueError(
+            f"keep_edges must be a boolean mask of shape ({graph.num_edges},), "
+            f"got dtype {keep.dtype} and shape {keep.shape}"
+        )
+    _check_writable(graph)
+    vertex_tag, edge_tag = _VERTEX_TAGS[graph.dim], _EDGE_TAGS[graph.dim]
+    rows_upper, cols_upper = np.triu_indices(graph.tangent_dim)
+    with _atomic_text_file(Path(path)) as out:
+        out.write(_format_records(vertex_tag.name, graph.vertex_ids[:, None], graph.poses))
+        out.write("".join(f"{_FIX} {i}\n" for i in graph.vertex_ids[graph.fixed].tolist()))
+        edge_values = np.concatenate(
+            (graph.measurements[keep], graph.information[keep][:, rows_upper, cols_upper]), axis=1
+        )
+        out.write(_format_records(edge_tag.name, graph.vertex_ids[graph.edges[keep]], edge_values))
+
+
+def _read_text(path: Path) -> str:
+    """Return the file's text, turning I/O and encoding failures into `G2oFormatError`."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise G2oFormatError(f"cannot read file: {exc.strerror or exc}", path) from exc
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise G2oFormatError("not a text file (invalid UTF-8 byte)", path, line) from exc
+
+
+def _split_records(
+    lines: list[str], context: _Context, skip_unknown: bool
+) -> tuple[int | None, _Records, _Records, _Records]:
+    """Group the fields of each line by record type, checking tags and field counts.
+
+    Returns:
+        `(dim, vertices, edges, fixes)`; `dim` is None when the file has no vertex or edge line.
+    """
+    vertices, edges, fixes = _Records([], []), _Records([], []), _Records([], [])
+    dim = None
+    first_line = 0
+    for line_number, line in enumerate(lines, start=1):
+        if "#" in line:
+            line = line[: line.index("#")]
+        fields = line.split()
+        if not fields:
+            continue
+        name = fields[0]
+        tag = _TAGS.get(name)
+        if tag is None:
+            if name == _FIX:
+                if len(fields) < 2:
+                    raise context.error("FIX needs at least one vertex id", line_number)
+                fixes.rows.append(fields)
+                fixes.lines.append(line_number)
+            elif not skip_unknown:
+                raise context.error(
+                    f"unknown tag {name!r}; "
+                    "pass skip_unknown=True / --skip-unknown to ignore such lines",
+                    line_number,
+                )
+            continue
+        if len(fields) - 1 != tag.num_fields:
+            raise context.error(
+                f"{name} needs {tag.num_fields} fields after the tag ({tag.layout}), "
+                f"found {len(fields) - 1}",
+                line_number,
+            )
+        if tag.dim != dim:
+            if dim is not None:
+                raise context.error(
+                    f"{name} is {tag.dim}D but line {first_line} is {dim}D; "
+                    "2D and 3D records cannot be mixed in one file",
+                    line_number,
+                )
+            dim, first_line = tag.dim, line_number
+        records = vertices if tag.kind == "vertex" else edges
+        records.rows.append(fields)
+        records.lines.append(line_number)
+    return dim, vertices, edges, fixes
+
+
+def _to_arrays(records: _Records, tag: _Tag, context: _Context) -> tuple[np.ndarray, np.ndarray]:
+    """Convert validated rows to `(n, num_ids)` int64 ids and `(n, num_values)` float64 values."""
+    n, k = len(records.rows), 1 + tag.num_ids
+    try:
+        ids = np.array([row[1:k] for row in records.rows], dtype=np.int64).reshape(n, tag.num_ids)
+        flat = itertools.chain.from_iterable(row[k:] for row in records.rows)
+        values = np.array(list(map(float, flat)), dtype=np.float64).reshape(n, tag.num_values)
+    except (ValueError, OverflowError):
+        _raise_first_bad_field(records, tag, context)
+        raise  # unreachable: the scan above always finds the culprit
+    return ids, values
+
+
+def _raise_first_bad_field(records: _Records, tag: _Tag, context: _Context) -> None:
+    """Find the first field that is not a valid id or number and raise for its line."""
+    for row, line_number in zip(records.rows, records.lines):
+        for position, token in enumerate(row[1:], start=1):
+            if position <= tag.num_ids:
+                _parse_id(token, tag.name, position, line_number, context)
+            elif not _is_float(token):
+                raise context.error(
+                    f"{tag.name} field {position} is {token!r}, expected a number", line_number
+                )
+
+
+def _parse_id(token: str, tag_name: str, position: int, line_number: int, context: _Context) -> int:
+    """Parse one vertex id, raising for its line unless it is an int64 integer."""
+    try:
+        vertex_id = int(token)
+    except ValueError:
+        vertex_id = None
+    if vertex_id is None or abs(vertex_id) > _INT64_MAX:
+        raise context.error(
+            f"{tag_name} field {position} is {token!r}, expected an integer vertex id", line_number
+        )
+    return vertex_id
+
+
+def _is_float(token: str) -> bool:
+    """Whether `float` accepts the token (the parser used on the fast path)."""
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _check_finite(
+    values: np.ndarray, lines: np.ndarray, tag: _Tag, first_field: int, context: _Context
+) -> None:
+    """Reject NaN and infinite values, naming the first offending line and field."""
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row, column = np.argwhere(bad)[0]
+        raise context.error(
+            f"{tag.name} field {first_field + column} is {values[row, column]}, "
+            "expected a finite number",
+            int(lines[row]),
+        )
+
+
+def _check_quaternions(quaternions: np.ndarray, lines: np.ndarray, context: _Context) -> None:
+    """Reject quaternions too short to normalize (stored values are otherwise kept as read)."""
+    norms = np.linalg.norm(quaternions, axis=1)
+    bad = np.flatnonzero(norms < _MIN_QUATERNION_NORM)
+    if len(bad):
+        raise context.error(
+            f"quaternion (qx qy qz qw) has norm {norms[bad[0]]:.3g}, too small to normalize",
+            int(lines[bad[0]]),
+        )
+
+
+def _check_unique_vertices(vertex_ids: np.ndarray, lines: np.ndarray, context: _Context) -> None:
+    """Reject a vertex id defined twice, naming both lines."""
+    order = np.argsort(vertex_ids, kind="stable")
+    repeats = np.flatnonzero(np.diff(vertex_ids[order]) == 0)
+    if len(repeats):
+        # Report the pair whose second definition comes first in the file.
+        first_rows, second_rows = order[repeats], order[repeats + 1]
+        k = np.argmin(lines[second_rows])
+        raise context.error(
+            f"vertex id {vertex_ids[first_rows[k]]} is defined twice, on lines "
+            f"{lines[first_rows[k]]} and {lines[second_rows[k]]}",
+            int(lines[second_rows[k]]),
+        )
+
+
+def _check_no_self_edges(edge_ids: np.ndarray, lines: np.ndarray, context: _Context) -> None:
+    """Reject an edge from a vertex to itself (it measures nothing)."""
+    bad = np.flatnonzero(edge_ids[:, 0] == edge_ids[:, 1])
+    if len(bad):
+        raise context.error(
+            f"edge joins vertex {edge_ids[bad[0], 0]} to itself", int(lines[bad[0]])
+        )
+
+
+def _check_positive_definite(information: np.ndarray, lines: np.ndarray, context: _Context) -> None:
+    """Reject information matrices that are not numerically positive definite."""
+    eigenvalues = np.linalg.eigvalsh(information)
+    # Relative tolerance: below d * eps * largest, the smallest eigenvalue is roundoff, not data.
+    d = information.shape[-1]
+    scale = np.abs(eigenvalues).max(axis=1)
+    # Written as "not above" so that a NaN eigenvalue (overflow on huge entries) also fails.
+    bad = np.flatnonzero(~(eigenvalues[:, 0] > d * np.finfo(float).eps * scale))
+    if len(bad):
+        k = bad[0]
+        raise context.error(
+            f"information matrix is not positive definite (eigenvalues {eigenvalues[k, 0]:.3g} "
+            f"to {eigenvalues[k, -1]:.3g}); "
+            f"{len(bad)} of the file's {len(information)} edges are affected",
+            int(lines[k]),
+        )
+
+
+def _fixed_mask(fixes: _Records, vertex_ids: np.ndarray, context: _Context) -> np.ndarray:
+    """Return the `(N,)` bool mask of vertices named by FIX lines."""
+    fixed_ids, fixed_lines = [], []
+    for row, line_number in zip(fixes.rows, fixes.lines):
+        for position, token in enumerate(row[1:], start=1):
+            fixed_ids.append(_parse_id(token, _FIX, position, line_number, context))
+            fixed_lines.append(line_number)
+    fixed_ids = np.array(fixed_ids, dtype=np.int64)
+    rows = np.minimum(np.searchsorted(vertex_ids, fixed_ids), len(vertex_ids) - 1)
+    unknown = np.flatnonzero(vertex_ids[rows] != fixed_ids)
+    if len(unknown):
+        k = unknown[0]
+        raise context.error(
+            f"FIX names vertex {fixed_ids[k]}, which no VERTEX or EDGE line mentions",
+            fixed_lines[k],
+        )
+    fixed = np.zeros(len(vertex_ids), dtype=bool)
+    fixed[rows] = True
+    return fixed
+
+
+def _information_from_upper(upper: np.ndarray, d: int) -> np.ndarray:
+    """Build `(E, d, d)` symmetric matrices from `(E, d(d+1)/2)` row-major upper triangles."""
+    rows, cols = np.triu_indices(d)
+    information = np.zeros((len(upper), d, d))
+    information[:, rows, cols] = upper
+    information[:, cols, rows] = upper
+    return information
+
+
+def _check_writable(graph: PoseGraph) -> None:
+    """Refuse to write values that `read_g2o` would reject."""
+    for name in ("poses", "measurements", "information"):
+        values = getattr(graph, name)
+        if not np.isfinite(values).all():
+            row = int(np.flatnonzero(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))[0])
+            what = f"vertex {graph.vertex_ids[row]}" if name == "poses" else f"edge {row}"
+            raise GraphError(f"cannot write g2o: {name} of {what} is not finite")
+
+
+def _format_records(tag: str, ids: np.ndarray, values: np.ndarray) -> str:
+    """Format rows as `TAG id... value...` lines; `repr` gives the shortest exact float text."""
+    return "".join(
+        f"{tag} {' '.join(map(str, row_ids))} {' '.join(map(repr, row_values))}\n"
+        for row_ids, row_values in zip(ids.tolist(), values.tolist())
+    )
+
+
+@contextlib.contextmanager
+def _atomic_text_file(path: Path) -> Iterator[TextIO]:
+    """Yield a temporary file beside `path` that replaces `path` only if the block succeeds."""
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    # os.open with mode 0o666 lets the umask decide permissions, as for a plain open().
+    descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        with os.fdopen(descriptor, "w", encoding="utf-8", newline="\n") as out:
+            yield out
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temporary)
+        raise
