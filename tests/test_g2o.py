@@ -1,0 +1,346 @@
+"""Reading and writing g2o files: layout, exact round trips, one-line errors, atomic writes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import egnc.io.g2o as g2o_module
+from egnc.errors import G2oFormatError, GraphError
+from egnc.graph import PoseGraph
+from egnc.initialize import spanning_tree
+from egnc.io import read_g2o, write_g2o
+from egnc.lie import se2
+
+# From ../shared/datasets/README.md: file -> (dim, VERTEX lines, EDGE lines). kitti_00 has no
+# VERTEX line at all; its 4541 poses come from the edges.
+DATASETS = {
+    "csail.g2o": (2, 1045, 1172),
+    "intel.g2o": (2, 943, 1837),
+    "manhattanOlson3500.g2o": (2, 3500, 5598),
+    "city10000.g2o": (2, 10000, 20687),
+    "MIT.g2o": (2, 808, 827),
+    "kitti_00.g2o": (2, 0, 4677),
+    "sphere2500.g2o": (3, 2500, 4949),
+    "sphere_a.g2o": (3, 2200, 8647),
+    "parking-garage.g2o": (3, 1661, 6275),
+    "cubicle.g2o": (3, 5750, 16869),
+    "smallGrid3D.g2o": (3, 125, 297),
+    "tinyGrid3D.g2o": (3, 9, 11),
+}
+# cubicle.g2o stores 5021 indefinite information matrices (first on line 5753), so it is rejected.
+UNREADABLE = {"cubicle.g2o": 5753}
+READABLE = sorted(set(DATASETS) - set(UNREADABLE))
+ARRAYS = ("vertex_ids", "poses", "edges", "measurements", "information", "fixed")
+
+
+def info_upper(d: int, scale: float = 1.0) -> str:
+    """The upper triangle of `scale * I_d`, row-major, as g2o text."""
+    rows, cols = np.triu_indices(d)
+    return " ".join(repr(scale * float(r == c)) for r, c in zip(rows, cols))
+
+
+V2 = "VERTEX_SE2 0 0 0 0\n"
+V2B = "VERTEX_SE2 1 1 0 0\n"
+E2 = f"EDGE_SE2 0 1 1 0 0 {info_upper(3)}\n"
+V3 = "VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1\n"
+E3 = f"EDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 {info_upper(6)}\n"
+
+TINY_2D = f"""# tiny 2D graph: ids not contiguous, vertices out of order, an edge with i > j
+VERTEX_SE2 10 0 0 0   
+VERTEX_SE2 5 1.5 -2 0.25
+
+VERTEX_SE2 20 3 4 3.5
+FIX 10
+EDGE_SE2 10 5 1.5 -2 0.25 500 10 0 400 0 1000  # odometry, trailing comment
+EDGE_SE2 20 5 -0.1 0.2 -7 1 0 0 1 0 1
+EDGE_SE2 5 20 1e-3 -0 3.14159 {info_upper(3, 2.0)}
+"""
+
+TINY_3D = f"""VERTEX_SE3:QUAT 2 0 0 0 0 0 0 2
+VERTEX_SE3:QUAT 0 1 2 3 0.1 0.2 0.3 -0.9
+EDGE_SE3:QUAT 0 2 1 0 0 0 0 0.7071 0.7071 {info_upper(6, 3.0)}
+"""
+
+
+def write_text(tmp_path: Path, text: str, name: str = "graph.g2o") -> Path:
+    """Write `text` to a file under `tmp_path` and return its path."""
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def assert_same_graph(a: PoseGraph, b: PoseGraph) -> None:
+    """Assert bit-identical arrays (dtype, shape and bytes, so -0.0 differs from 0.0)."""
+    assert a.dim == b.dim
+    for name in ARRAYS:
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x.dtype, x.shape) == (y.dtype, y.shape), name
+        assert x.tobytes() == y.tobytes(), name
+
+
+def round_trip(graph: PoseGraph, tmp_path: Path, **kwargs) -> PoseGraph:
+    """Write the graph and read it back."""
+    path = tmp_path / "round_trip.g2o"
+    write_g2o(graph, path, **kwargs)
+    return read_g2o(path)
+
+
+# --- Reading well-formed files ---------------------------------------------------------------
+
+
+def test_tiny_2d_layout(tmp_path):
+    graph = read_g2o(write_text(tmp_path, TINY_2D))
+    assert graph.dim == 2
+    np.testing.assert_array_equal(graph.vertex_ids, [5, 10, 20])
+    np.testing.assert_array_equal(graph.poses, [[1.5, -2, 0.25], [0, 0, 0], [3, 4, 3.5]])
+    np.testing.assert_array_equal(graph.edges, [[1, 0], [2, 0], [0, 2]])
+    np.testing.assert_array_equal(graph.edge_lines, [7, 8, 9])
+    np.testing.assert_array_equal(graph.fixed, [False, True, False])
+    # Angles are stored as read, not wrapped.
+    np.testing.assert_array_equal(graph.measurements[:, 2], [0.25, -7, 3.14159])
+    np.testing.assert_array_equal(
+        graph.information[0], [[500, 10, 0], [10, 400, 0], [0, 0, 1000]]
+    )
+    np.testing.assert_array_equal(graph.information[2], 2.0 * np.eye(3))
+    assert np.signbit(graph.measurements[2, 1])  # "-0" stays negative zero
+
+
+def test_tiny_3d_quaternions_stored_as_read(tmp_path):
+    graph = read_g2o(write_text(tmp_path, TINY_3D))
+    assert graph.dim == 3
+    np.testing.assert_array_equal(graph.vertex_ids, [0, 2])
+    np.testing.assert_array_equal(graph.poses[0, 3:], [0.1, 0.2, 0.3, -0.9])
+    np.testing.assert_array_equal(graph.poses[1, 3:], [0, 0, 0, 2])
+    np.testing.assert_array_equal(graph.measurements[0, 3:], [0, 0, 0.7071, 0.7071])
+    np.testing.assert_array_equal(graph.information[0], 3.0 * np.eye(6))
+
+
+def test_crlf_line_endings(tmp_path):
+    path = tmp_path / "crlf.g2o"
+    path.write_bytes(TINY_2D.replace("\n", "\r\n").encode())
+    assert_same_graph(read_g2o(path), read_g2o(write_text(tmp_path, TINY_2D)))
+
+
+def test_skip_unknown_ignores_other_tags(tmp_path):
+    text = V2 + "VERTEX_XY 7 1 2\nPARAMS_SE3OFFSET 0 0 0 0 0 0 0 1\n" + E2
+    graph = read_g2o(write_text(tmp_path, text), skip_unknown=True)
+    np.testing.assert_array_equal(graph.vertex_ids, [0, 1])
+    np.testing.assert_array_equal(graph.edge_lines, [4])
+
+
+def test_missing_vertex_composed_from_known_neighbour(tmp_path):
+    # Vertex 1 has no VERTEX line; the edges are exact, so either neighbour gives the same pose.
+    X = np.array([[1.0, 2.0, 0.5], [2.0, 3.0, 1.0], [2.5, 2.0, -2.0]])
+    T = se2.from_xytheta(X)
+    Z01 = se2.to_xytheta(se2.between(T[0], T[1]))
+    Z21 = se2.to_xytheta(se2.between(T[2], T[1]))
+    def fields(values: np.ndarray) -> str:
+        return " ".join(map(repr, values.tolist()))
+
+    info = info_upper(3)
+    text = (
+        f"VERTEX_SE2 0 {fields(X[0])}\nVERTEX_SE2 2 {fields(X[2])}\n"
+        f"EDGE_SE2 0 1 {fields(Z01)} {info}\nEDGE_SE2 2 1 {fields(Z21)} {info}\n"
+    )
+    graph = read_g2o(write_text(tmp_path, text))
+    np.testing.assert_array_equal(graph.poses[[0, 2]], X[[0, 2]])
+    np.testing.assert_allclose(se2.from_xytheta(graph.poses[1]), T[1], atol=1e-12)
+
+
+# --- Real datasets ----------------------------------------------------------------------------
+
+
+def test_dataset_table_covers_every_file(shared_datasets):
+    assert {path.name for path in shared_datasets.glob("*.g2o")} <= set(DATASETS)
+
+
+@pytest.mark.parametrize("name", READABLE)
+def test_dataset_counts_and_exact_round_trip(name, dataset_path, tmp_path):
+    dim, vertex_lines, edge_lines = DATASETS[name]
+    graph = read_g2o(dataset_path(name))
+    assert graph.dim == dim
+    assert graph.num_edges == edge_lines
+    if vertex_lines:
+        assert graph.num_poses == vertex_lines
+    again = round_trip(graph, tmp_path)
+    assert_same_graph(graph, again)
+    # Rewritten files list vertices, then FIX lines, then edges, one per line.
+    first_edge_line = graph.num_poses + int(graph.fixed.sum()) + 1
+    np.testing.assert_array_equal(again.edge_lines, first_edge_line + np.arange(graph.num_edges))
+    # A second write is byte-identical to the first.
+    second = tmp_path / "second.g2o"
+    write_g2o(again, second)
+    assert second.read_bytes() == (tmp_path / "round_trip.g2o").read_bytes()
+
+
+@pytest.mark.parametrize("name", sorted(UNREADABLE))
+def test_dataset_with_indefinite_information_is_rejected(name, dataset_path):
+    with pytest.raises(G2oFormatError) as caught:
+        read_g2o(dataset_path(name))
+    assert f"{name}:{UNREADABLE[name]}: information matrix is not positive definite" in str(caught.value)
+
+
+def test_kitti_initial_guess_is_exact_along_spanning_tree(dataset_path):
+    graph = read_g2o(dataset_path("kitti_00.g2o"))
+    assert graph.num_poses == 4541 and graph.vertex_ids[0] == 0
+    np.testing.assert_array_equal(graph.poses[0], [0.0, 0.0, 0.0])
+
+    T = se2.from_xytheta(graph.poses)
+    Z = se2.from_xytheta(graph.measurements)
+    i, j = graph.edges.T
+    # Per edge: how far X_j is from X_i Z_ij (matrix entries, metres and unitless).
+    mismatch = np.abs(se2.between(T[i], T[j]) - Z).max(axis=(1, 2))
+
+    parent, tree_edge = spanning_tree(graph.num_poses, graph.edges, np.array([0]))
+    tree = tree_edge[parent >= 0]
+    assert len(tree) == graph.num_poses - 1
+    assert mismatch[tree].max() < 1e-9
+    # Independent of which tree the reader chose: the exactly satisfied edges span the graph.
+    from egnc.connectivity import connected_components
+
+    count, _ = connected_components(graph.num_poses, graph.edges[mismatch < 1e-9])
+    assert count == 1
+
+
+# --- Errors: one line, naming the file and the 1-based line -----------------------------------
+
+QUAT_ZERO = "VERTEX_SE3:QUAT 1 0 0 0 0 0 0 0\n"
+ERROR_CASES = {
+    "too few fields": (V2 + "VERTEX_SE2 1 0 0\n" + E2, 2, "VERTEX_SE2 needs 4 fields after the tag"),
+    "too many fields": (V2 + V2B + E2.replace("\n", " 7\n"), 3, "EDGE_SE2 needs 11 fields"),
+    "line numbers count comments and blanks": ("# header\n\n" + V2 + "VERTEX_SE2 1 0 0\n" + E2, 4, "found 3"),
+    "non-numeric value": (V2 + "VERTEX_SE2 1 0 abc 0\n" + E2, 2, "field 3 is 'abc', expected a number"),
+    "non-integer id": (V2 + V2B + E2.replace("0 1 ", "0 1.5 ", 1), 3, "field 2 is '1.5', expected an integer vertex id"),
+    "id out of range": (V2 + E2.replace("0 1 ", "0 99999999999999999999 ", 1), 2, "expected an integer vertex id"),
+    "truncated last line": (V2 + V2B + E2[:30], 3, "file looks truncated"),
+    "truncated inside a number": (V2 + V2B + E2.rstrip("\n") + "e", 3, "file looks truncated"),
+    "unknown tag": (V2 + "VERTEX_XY 7 1 2\n" + E2, 2, "unknown tag 'VERTEX_XY'; pass skip_unknown=True / --skip-unknown"),
+    "nan": (V2 + "VERTEX_SE2 1 nan 0 0\n" + E2, 2, "field 2 is nan, expected a finite number"),
+    "inf in information": (V2 + V2B + E2.replace(" 0.0 1.0\n", " inf 1.0\n"), 3, "is inf"),
+    "indefinite information": (V2 + V2B + E2.replace("1.0 0.0 0.0 1.0", "1.0 2.0 0.0 1.0", 1), 3, "not positive definite"),
+    "zero information": (V2 + V2B + E2.replace("1.0", "0.0"), 3, "not positive definite"),
+    "2D and 3D mixed": (V2 + V3.replace(" 0 ", " 1 ", 1) + E2, 2, "VERTEX_SE3:QUAT is 3D but line 1 is 2D"),
+    "duplicate vertex id": (V2 + V2B + "VERTEX_SE2 0 1 1 1\n" + E2, 3, "vertex id 0 is defined twice, on lines 1 and 3"),
+    "edge to itself": (V2 + V2B + E2 + E2.replace("0 1 ", "1 1 ", 1), 4, "edge joins vertex 1 to itself"),
+    "zero vertex quaternion": (V3 + QUAT_ZERO + E3, 2, "too small to normalize"),
+    "zero edge quaternion": (V3 + E3.replace(" 0 0 1 1.0", " 0 0 0 1.0", 1), 2, "too small to normalize"),
+    "FIX unknown vertex": (V2 + "FIX 7\n" + E2, 2, "FIX names vertex 7"),
+    "FIX without id": (V2 + "FIX\n" + E2, 2, "FIX needs at least one vertex id"),
+    "FIX non-integer": (V2 + "FIX 0 x\n" + E2, 2, "FIX field 2 is 'x'"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(ERROR_CASES))
+def test_format_error_names_file_and_line(case, tmp_path):
+    text, line, fragment = ERROR_CASES[case]
+    path = write_text(tmp_path, text, name="bad.g2o")
+    with pytest.raises(G2oFormatError) as caught:
+        read_g2o(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}:{line}: "), message
+    assert caught.value.line == line
+    assert fragment in message
+    assert "\n" not in message
+
+
+@pytest.mark.parametrize("text", ["", "# only a comment\n\n", V2 + V2B, "FIX 0\n"])
+def test_file_without_edges_is_an_error(text, tmp_path):
+    path = write_text(tmp_path, text, name="empty.g2o")
+    with pytest.raises(G2oFormatError, match="no EDGE_SE2 or EDGE_SE3:QUAT lines") as caught:
+        read_g2o(path)
+    assert str(caught.value).startswith(f"{path}: ")
+
+
+def test_unreadable_files(tmp_path):
+    with pytest.raises(G2oFormatError, match="missing.g2o: cannot read file"):
+        read_g2o(tmp_path / "missing.g2o")
+    binary = tmp_path / "binary.g2o"
+    binary.write_bytes(V2.encode() + b"\xff\xfe\x00\n")
+    with pytest.raises(G2oFormatError, match=r"binary.g2o:2: not a text file"):
+        read_g2o(binary)
+
+
+def test_disconnected_graph_names_components(tmp_path):
+    text = E2 + E2.replace("0 1 ", "5 6 ", 1) + E2.replace("0 1 ", "6 7 ", 1) + "VERTEX_SE2 9 0 0 0\n"
+    path = write_text(tmp_path, text, name="islands.g2o")
+    with pytest.raises(GraphError) as caught:
+        read_g2o(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}: ")
+    assert "3 connected components: {0..1} (2 poses), {5..7} (3 poses), {9} (1 pose)" in message
+
+
+# --- Writing ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("text", [TINY_2D, TINY_3D], ids=["2d", "3d"])
+def test_tiny_round_trip_is_exact(text, tmp_path):
+    graph = read_g2o(write_text(tmp_path, text))
+    assert_same_graph(graph, round_trip(graph, tmp_path))
+
+
+def test_keep_edges_writes_a_subset(tmp_path):
+    graph = read_g2o(write_text(tmp_path, TINY_2D))
+    keep = np.array([True, False, True])
+    assert_same_graph(graph.subgraph_edges(keep), round_trip(graph, tmp_path, keep_edges=keep))
+    with pytest.raises(ValueError, match="boolean mask of shape"):
+        write_g2o(graph, tmp_path / "x.g2o", keep_edges=np.array([0, 2]))
+    assert not (tmp_path / "x.g2o").exists()
+
+
+def test_write_uses_default_permissions(tmp_path):
+    graph = read_g2o(write_text(tmp_path, TINY_2D))
+    umask = os.umask(0)
+    os.umask(umask)
+    write_g2o(graph, tmp_path / "out.g2o")
+    assert (tmp_path / "out.g2o").stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+@pytest.fixture
+def tiny_graph(tmp_path) -> PoseGraph:
+    return read_g2o(write_text(tmp_path, TINY_2D))
+
+
+def test_failed_write_leaves_nothing(tiny_graph, tmp_path, monkeypatch):
+    format_records = g2o_module._format_records
+
+    def fail_on_edges(tag, ids, values):
+        if tag.startswith("EDGE"):
+            raise RuntimeError("disk full")
+        return format_records(tag, ids, values)
+
+    monkeypatch.setattr(g2o_module, "_format_records", fail_on_edges)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_g2o(tiny_graph, out_dir / "new.g2o")
+    assert list(out_dir.iterdir()) == []
+
+    existing = out_dir / "existing.g2o"
+    existing.write_text("old content\n")
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_g2o(tiny_graph, existing)
+    assert list(out_dir.iterdir()) == [existing]
+    assert existing.read_text() == "old content\n"
+
+
+def test_failed_replace_removes_temporary(tiny_graph, tmp_path, monkeypatch):
+    def refuse(src, dst):
+        raise OSError("replace refused")
+
+    monkeypatch.setattr(g2o_module.os, "replace", refuse)
+    with pytest.raises(OSError, match="replace refused"):
+        write_g2o(tiny_graph, tmp_path / "new.g2o")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["graph.g2o"]
+
+
+def test_non_finite_graph_is_not_written(tiny_graph, tmp_path):
+    poses = tiny_graph.poses.copy()
+    poses[1, 0] = np.nan
+    with pytest.raises(GraphError, match="poses of vertex 10 is not finite"):
+        write_g2o(tiny_graph.with_poses(poses), tmp_path / "nan.g2o")
+    assert not (tmp_path / "nan.g2o").exists()
