@@ -1,0 +1,506 @@
+"""GTSAM 4.3 baselines on g2o files: least-squares Levenberg-Marquardt and GNC-GM / GNC-TLS.
+
+Benchmark-only module: it imports `gtsam` (the optional `bench` extra) and egnc never imports it.
+
+Reference protocol (reproduces every printed digit of `REFERENCE_ERRORS`):
+- `gtsam.readG2o(path, is3D)`; graph keys are the g2o vertex ids.
+- One prior on the lowest id, at its initial value, isotropic sigma 1e-3 on every tangent
+  component. It is appended last, so factor `k < num_edges` is the k-th EDGE line of the file.
+- `LevenbergMarquardtOptimizer` with `relativeErrorTol = absoluteErrorTol = 1e-12`,
+  `maxIterations = 1000`, everything else GTSAM's default (`lm_params()`).
+  GTSAM's own defaults (1e-5, 1e-5, 100) stop early on the 3D files and miss the reference in the
+  9th significant digit (sphere2500 675.7009649, tinyGrid3D 9.313909534).
+- Error is `graph.error(values)` = 0.5 * sum of squared whitened residuals (prior included).
+- Times are wall-clock `time.perf_counter()` around `readG2o` and around `optimize()` alone.
+
+Conventions of this gtsam wheel that egnc matches (checked numerically, see benchmarks/README.md):
+`BetweenFactorPose{2,3}` error is `Logmap(Z^-1 Xi^-1 Xj)` (full SE(n) log as the chart);
+tangent order is `(x, y, theta)` for Pose2 and `(rx, ry, rz, tx, ty, tz)` for Pose3; `readG2o`
+permutes the g2o 6x6 information `(x, y, z, rx, ry, rz)` into that order without rescaling and
+normalizes quaternions.
+
+GNC runs (`run_gnc`) happen in a child process that is killed at a time limit, so a stuck GTSAM
+solve becomes a reported timeout instead of a hang.
+
+Run as a script: `python benchmarks/gtsam_baseline.py [files...]` prints a markdown table.
+
+References:
+- GTSAM 4.3, `gtsam/nonlinear/LevenbergMarquardtOptimizer.cpp`, `GncOptimizer.h`.
+- Yang, Antonante, Tzoumas, Carlone, "Graduated Non-Convexity for Robust Spatial Perception",
+  RA-L 2020.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import multiprocessing
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal, Sequence
+
+import gtsam
+import numpy as np
+
+# `../shared/datasets` beside the checkout (see that folder's README); EGNC_DATASETS overrides.
+DATASETS_DIR = Path(
+    os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
+)
+
+PRIOR_SIGMA = 1e-3
+
+# Final LM errors of the reference protocol. Kept as strings: the printed precision is the
+# tolerance of the match (see `matches_reference`).
+REFERENCE_ERRORS: dict[str, str] = {
+    "csail": "19.56406892",
+    "intel": "273.2315612",
+    "manhattanOlson3500": "73.0393643",
+    "city10000": "255.9937253",
+    "sphere2500": "675.7009629",
+    "parking-garage": "0.6341923996",
+    "smallGrid3D": "517.9253324",
+    "tinyGrid3D": "9.313909434",
+}
+
+GncKind = Literal["gm", "tls"]
+GncStatus = Literal["ok", "timeout", "error"]
+
+
+@dataclass(frozen=True)
+class LoadedGraph:
+    """A g2o file read by `gtsam.readG2o`, with the reference prior appended as the last factor."""
+
+    path: str
+    is_3d: bool
+    graph: gtsam.NonlinearFactorGraph  # `num_edges` between factors in file order, then the prior
+    initial: gtsam.Values
+    num_poses: int
+    num_edges: int
+    edge_keys: np.ndarray  # `(num_edges, 2)` int64, (i, j) of each between factor
+    prior_index: int  # factor index of the prior, == num_edges
+    read_time_s: float  # `readG2o` alone
+
+
+@dataclass(frozen=True)
+class LmResult:
+    """One least-squares LM solve under the reference protocol."""
+
+    path: str
+    is_3d: bool
+    num_poses: int
+    num_edges: int
+    initial_error: float
+    final_error: float  # graph.error(result), prior included
+    iterations: int  # accepted LM steps (`optimizer.iterations()`)
+    read_time_s: float
+    optimize_time_s: float  # `optimize()` alone; median over repeats when repeated
+    optimize_times_s: tuple[float, ...]  # every repeat
+    reference: float | None
+    matches: bool | None  # None when the file has no reference value
+
+
+@dataclass(frozen=True)
+class GncResult:
+    """One GTSAM GNC solve, run in a child process under a time limit."""
+
+    path: str
+    kind: GncKind
+    status: GncStatus  # "timeout": killed at `time_limit_s`; "error": see `message`
+    message: str
+    time_limit_s: float
+    wall_time_s: float  # parent-side, includes process start and transfer
+    read_time_s: float | None
+    optimize_time_s: float | None  # `GncLMOptimizer.optimize()` alone
+    keys: np.ndarray | None  # `(N,)` int64, ascending
+    poses: np.ndarray | None  # `(N, 3)` x, y, theta or `(N, 7)` x, y, z, qx, qy, qz, qw (qw >= 0)
+    edge_keys: np.ndarray | None  # `(M, 2)` int64, (i, j) of each file edge, in file order
+    weights: np.ndarray | None  # `(M,)` final GNC weight of each file edge, in [0, 1]
+    prior_weight: float | None
+    known_inliers: np.ndarray | None  # factor indices passed to `setKnownInliers`
+    final_error: float | None  # unweighted graph.error(result), prior included
+
+
+def dataset_path(name_or_path: str | os.PathLike[str]) -> Path:
+    """Resolve a file path, or a bare dataset name such as `csail`, against `DATASETS_DIR`."""
+    path = Path(name_or_path)
+    if path.exists():
+        return path
+    for candidate in (DATASETS_DIR / path, DATASETS_DIR / f"{path}.g2o"):
+        if candidate.exists():
+            return candidate
+    raise FileNotFoundError(f"no such g2o file: {name_or_path} (also looked in {DATASETS_DIR})")
+
+
+def g2o_is_3d(path: str | os.PathLike[str]) -> bool:
+    """Whether a g2o file holds SE(3) poses, from its first VERTEX or EDGE tag."""
+    with open(path) as handle:
+        for line in handle:
+            tag = line.split(maxsplit=1)[0] if line.strip() else ""
+            if tag.startswith(("VERTEX_SE3", "EDGE_SE3")):
+                return True
+            if tag.startswith(("VERTEX_SE2", "EDGE_SE2")):
+                return False
+    raise ValueError(f"{path}: no VERTEX_SE2/SE3 or EDGE_SE2/SE3 line")
+
+
+def load_g2o(path: str | os.PathLike[str]) -> LoadedGraph:
+    """Read a g2o file with `gtsam.readG2o` and append the reference prior on the lowest id.
+
+    Raises:
+        ValueError: a factor refers to a pose without an initial value (e.g. an edges-only file).
+    """
+    path = dataset_path(path)
+    is_3d = g2o_is_3d(path)
+    start = time.perf_counter()
+    graph, initial = gtsam.readG2o(str(path), is_3d)
+    read_time_s = time.perf_counter() - start
+
+    num_edges = graph.size()
+    edge_keys = np.array([graph.at(k).keys() for k in range(num_edges)], dtype=np.int64)
+    edge_keys = edge_keys.reshape(num_edges, 2)
+    known = set(initial.keys())
+    missing = sorted(set(edge_keys.ravel().tolist()) - known)
+    if missing or not known:
+        raise ValueError(
+            f"{path}: {len(missing)} pose(s) without initial value (e.g. {missing[:3]}); "
+            "this baseline needs VERTEX lines"
+        )
+
+    first = min(known)
+    if is_3d:
+        noise = gtsam.noiseModel.Isotropic.Sigma(6, PRIOR_SIGMA)
+        graph.add(gtsam.PriorFactorPose3(first, initial.atPose3(first), noise))
+    else:
+        noise = gtsam.noiseModel.Isotropic.Sigma(3, PRIOR_SIGMA)
+        graph.add(gtsam.PriorFactorPose2(first, initial.atPose2(first), noise))
+    return LoadedGraph(
+        path=str(path),
+        is_3d=is_3d,
+        graph=graph,
+        initial=initial,
+        num_poses=initial.size(),
+        num_edges=num_edges,
+        edge_keys=edge_keys,
+        prior_index=num_edges,
+        read_time_s=read_time_s,
+    )
+
+
+def lm_params(
+    relative_error_tol: float = 1e-12,
+    absolute_error_tol: float = 1e-12,
+    max_iterations: int = 1000,
+) -> gtsam.LevenbergMarquardtParams:
+    """LM parameters of the reference protocol; everything not named keeps GTSAM's default.
+
+    GTSAM stops when `newError <= errorTol` (0), or `currentError - newError <= absoluteErrorTol`,
+    or `(currentError - newError) / currentError <= relativeErrorTol`, or after `max_iterations`
+    accepted steps. Note: at 1e-12 the last step is below floating-point noise of the cost on the
+    large files, so LM may spend its final iteration raising lambda to `lambdaUpperBound` (1e5)
+    before stopping (about 17 extra solves on city10000); the error is unaffected.
+    """
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(relative_error_tol)
+    params.setAbsoluteErrorTol(absolute_error_tol)
+    params.setMaxIterations(max_iterations)
+    return params
+
+
+def reference_error(path: str | os.PathLike[str]) -> float | None:
+    """The reference final error of a dataset (by file stem), or None if there is none."""
+    text = REFERENCE_ERRORS.get(Path(path).stem)
+    return None if text is None else float(text)
+
+
+def matches_reference(path: str | os.PathLike[str], error: float) -> bool | None:
+    """Whether `error` rounds to the reference value at the reference's printed precision."""
+    text = REFERENCE_ERRORS.get(Path(path).stem)
+    if text is None:
+        return None
+    decimals = len(text.partition(".")[2])
+    # Half a unit in the last printed place, plus a hair for binary rounding of the decimal.
+    return abs(error - float(text)) <= 0.5 * 10.0**-decimals * (1.0 + 1e-9)
+
+
+def run_lm(
+    path: str | os.PathLike[str],
+    params: gtsam.LevenbergMarquardtParams | None = None,
+    repeat: int = 1,
+) -> LmResult:
+    """Solve a g2o file with GTSAM's LM under the reference protocol.
+
+    Args:
+        path: g2o file, or a dataset name in `DATASETS_DIR`.
+        params: LM parameters; `lm_params()` when None.
+        repeat: number of timed `optimize()` calls, each from the file's initial values; the
+            reported time is their median and the error/iterations come from the last one.
+    """
+    loaded = load_g2o(path)
+    params = lm_params() if params is None else params
+    times = []
+    for _ in range(max(1, repeat)):
+        optimizer = gtsam.LevenbergMarquardtOptimizer(loaded.graph, loaded.initial, params)
+        start = time.perf_counter()
+        result = optimizer.optimize()
+        times.append(time.perf_counter() - start)
+    final_error = loaded.graph.error(result)
+    return LmResult(
+        path=loaded.path,
+        is_3d=loaded.is_3d,
+        num_poses=loaded.num_poses,
+        num_edges=loaded.num_edges,
+        initial_error=loaded.graph.error(loaded.initial),
+        final_error=final_error,
+        iterations=optimizer.iterations(),
+        read_time_s=loaded.read_time_s,
+        optimize_time_s=statistics.median(times),
+        optimize_times_s=tuple(times),
+        reference=reference_error(loaded.path),
+        matches=matches_reference(loaded.path, final_error),
+    )
+
+
+def values_to_arrays(values: gtsam.Values, is_3d: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Poses of a `gtsam.Values` as arrays ordered by key.
+
+    Returns:
+        keys `(N,)` int64 ascending, and poses `(N, 3)` x, y, theta (radians) for 2D or
+        `(N, 7)` x, y, z, qx, qy, qz, qw for 3D, with the quaternion sign chosen so qw >= 0.
+    """
+    keys = np.array(sorted(values.keys()), dtype=np.int64)
+    if is_3d:
+        poses = np.empty((len(keys), 7))
+        for row, key in enumerate(keys.tolist()):
+            pose = values.atPose3(key)
+            quat = pose.rotation().toQuaternion()
+            poses[row, :3] = pose.translation()
+            poses[row, 3:] = (quat.x(), quat.y(), quat.z(), quat.w())
+        poses[:, 3:] *= np.where(poses[:, 6:7] < 0.0, -1.0, 1.0)
+    else:
+        poses = np.empty((len(keys), 3))
+        for row, key in enumerate(keys.tolist()):
+            pose = values.atPose2(key)
+            poses[row] = (pose.x(), pose.y(), pose.theta())
+    return keys, poses
+
+
+def odometry_inliers(loaded: LoadedGraph) -> np.ndarray:
+    """Factor indices of the default known inliers: odometry edges (`j == i + 1`) and the prior."""
+    odometry = np.flatnonzero(loaded.edge_keys[:, 1] == loaded.edge_keys[:, 0] + 1)
+    return np.append(odometry, loaded.prior_index).astype(np.int64)
+
+
+def _gnc_params(
+    kind: GncKind, known_inliers: np.ndarray, base: Literal["default", "tight"]
+) -> gtsam.GncLMParams:
+    """GNC parameters: GTSAM defaults except the loss, the known inliers and the inner LM."""
+    inner = gtsam.LevenbergMarquardtParams() if base == "default" else lm_params()
+    params = gtsam.GncLMParams(inner)
+    params.setLossType({"gm": gtsam.GncLossType.GM, "tls": gtsam.GncLossType.TLS}[kind])
+    # setKnownInliers appends to the existing list; the params object is fresh here.
+    params.setKnownInliers([int(k) for k in known_inliers])
+    return params
+
+
+def _gnc_child(conn, path: str, kind: GncKind, known_inliers, base) -> None:
+    """Child-process body of `run_gnc`: solve and send one dict back through `conn`."""
+    try:
+        loaded = load_g2o(path)
+        inliers = odometry_inliers(loaded) if known_inliers is None else np.asarray(known_inliers)
+        optimizer = gtsam.GncLMOptimizer(
+            loaded.graph, loaded.initial, _gnc_params(kind, inliers, base)
+        )
+        start = time.perf_counter()
+        result = optimizer.optimize()
+        optimize_time_s = time.perf_counter() - start
+        weights = np.asarray(optimizer.getWeights(), dtype=float)
+        keys, poses = values_to_arrays(result, loaded.is_3d)
+        conn.send(
+            dict(
+                status="ok",
+                message="",
+                read_time_s=loaded.read_time_s,
+                optimize_time_s=optimize_time_s,
+                keys=keys,
+                poses=poses,
+                edge_keys=loaded.edge_keys,
+                weights=weights[: loaded.num_edges],
+                prior_weight=float(weights[loaded.prior_index]),
+                known_inliers=np.asarray(inliers, dtype=np.int64),
+                final_error=loaded.graph.error(result),
+            )
+        )
+    except Exception as exc:  # reported to the parent, never raised across the process boundary
+        conn.send(dict(status="error", message=f"{type(exc).__name__}: {exc}"))
+    finally:
+        conn.close()
+
+
+def run_gnc(
+    path: str | os.PathLike[str],
+    kind: GncKind = "gm",
+    time_limit_s: float = 600.0,
+    known_inliers: Sequence[int] | None = None,
+    base: Literal["default", "tight"] = "default",
+) -> GncResult:
+    """Solve a g2o file with `gtsam.GncLMOptimizer` in a child process killed at a time limit.
+
+    The graph is the reference protocol's (readG2o + prior, see `load_g2o`); GNC uses GTSAM's
+    defaults (inlier threshold 0.5 chi2(0.99, d) on the factor error, mu step 1.4).
+
+    Args:
+        path: g2o file, or a dataset name in `DATASETS_DIR`.
+        kind: "gm" (Geman-McClure) or "tls" (truncated least squares).
+        time_limit_s: wall-clock limit for the child (read + solve + transfer), seconds.
+        known_inliers: factor indices never reweighted; default odometry edges and the prior
+            (`odometry_inliers`). Edge k of the file is factor k, the prior is factor M.
+        base: inner LM parameters: GTSAM's defaults, or the reference protocol's `lm_params()`.
+    """
+    if kind not in ("gm", "tls"):
+        raise ValueError(f"kind must be 'gm' or 'tls', got {kind!r}")
+    path_str = str(dataset_path(path))
+    inliers = None if known_inliers is None else [int(k) for k in known_inliers]
+    # spawn: the child starts clean, whatever threads or GTSAM state the caller has.
+    context = multiprocessing.get_context("spawn")
+    receiver, sender = context.Pipe(duplex=False)
+    start = time.perf_counter()
+    process = context.Process(
+        target=_gnc_child, args=(sender, path_str, kind, inliers, base), daemon=True
+    )
+    process.start()
+    sender.close()  # so a child that dies without sending shows up as EOF
+    payload: dict = {}
+    try:
+        if receiver.poll(time_limit_s):
+            payload = receiver.recv()
+        else:
+            payload = dict(status="timeout", message=f"killed after {time_limit_s:g} s")
+    except EOFError:
+        process.join(5.0)
+        payload = dict(status="error", message=f"child exited with code {process.exitcode}")
+    finally:
+        if process.is_alive() and payload.get("status") != "ok":
+            process.kill()
+        process.join()
+        receiver.close()
+    wall_time_s = time.perf_counter() - start
+    return GncResult(
+        path=path_str,
+        kind=kind,
+        status=payload["status"],
+        message=payload.get("message", ""),
+        time_limit_s=time_limit_s,
+        wall_time_s=wall_time_s,
+        read_time_s=payload.get("read_time_s"),
+        optimize_time_s=payload.get("optimize_time_s"),
+        keys=payload.get("keys"),
+        poses=payload.get("poses"),
+        edge_keys=payload.get("edge_keys"),
+        weights=payload.get("weights"),
+        prior_weight=payload.get("prior_weight"),
+        known_inliers=payload.get("known_inliers"),
+        final_error=payload.get("final_error"),
+    )
+
+
+def format_lm_table(results: Sequence[LmResult | tuple[str, str]]) -> str:
+    """Markdown table of LM results; a `(path, reason)` tuple is printed as a skipped row."""
+    lines = [
+        "| file | dim | poses | edges | final error | reference | match | iterations "
+        "| read (s) | optimize (s) |",
+        "|---|---|---:|---:|---:|---:|---|---:|---:|---:|",
+    ]
+    for item in results:
+        if isinstance(item, tuple):
+            lines.append(f"| {Path(item[0]).name} | | | | skipped: {item[1]} | | | | | |")
+            continue
+        ref = REFERENCE_ERRORS.get(Path(item.path).stem, "-")
+        match = {True: "yes", False: "**no**", None: "-"}[item.matches]
+        lines.append(
+            f"| {Path(item.path).name} | {'3D' if item.is_3d else '2D'} | {item.num_poses} "
+            f"| {item.num_edges} | {item.final_error:.10g} | {ref} | {match} | {item.iterations} "
+            f"| {item.read_time_s:.3f} | {item.optimize_time_s:.3f} |"
+        )
+    return "\n".join(lines)
+
+
+def format_gnc_table(results: Sequence[GncResult]) -> str:
+    """Markdown table of GNC results: status, times, and how many loop closures were rejected."""
+    lines = [
+        "| file | kind | status | final error | loops | weight < 0.5 | optimize (s) | wall (s) |",
+        "|---|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for res in results:
+        if res.status != "ok":
+            lines.append(
+                f"| {Path(res.path).name} | {res.kind} | {res.status}: {res.message} | | | "
+                f"| | {res.wall_time_s:.1f} |"
+            )
+            continue
+        loops = res.edge_keys[:, 1] != res.edge_keys[:, 0] + 1
+        rejected = int(np.count_nonzero(res.weights[loops] < 0.5))
+        lines.append(
+            f"| {Path(res.path).name} | {res.kind} | ok | {res.final_error:.10g} "
+            f"| {int(loops.sum())} | {rejected} | {res.optimize_time_s:.3f} "
+            f"| {res.wall_time_s:.1f} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: LM table over files (default: every reference dataset), or GNC with --gnc."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "files", nargs="*", help="g2o files or dataset names (default: the reference datasets)"
+    )
+    parser.add_argument("--repeat", type=int, default=1, help="timed optimize() calls per file")
+    parser.add_argument(
+        "--tol", type=float, default=1e-12, help="LM relativeErrorTol = absoluteErrorTol"
+    )
+    parser.add_argument("--gnc", choices=["gm", "tls"], help="run GncLMOptimizer instead of LM")
+    parser.add_argument("--time-limit", type=float, default=600.0, help="GNC limit per file (s)")
+    args = parser.parse_args(argv)
+
+    files = args.files or list(REFERENCE_ERRORS)
+    stamp = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+    print(f"`{' '.join(['python', 'benchmarks/gtsam_baseline.py', *(argv or sys.argv[1:])])}`")
+    print(
+        f"{stamp}, gtsam {_gtsam_version()}, Python {platform.python_version()}, "
+        f"{platform.machine()}, {os.cpu_count()} cpus\n"
+    )
+    if args.gnc:
+        results = [run_gnc(name, args.gnc, args.time_limit) for name in files]
+        print(format_gnc_table(results))
+        return 0 if all(r.status == "ok" for r in results) else 1
+
+    rows: list[LmResult | tuple[str, str]] = []
+    for name in files:
+        try:
+            rows.append(run_lm(name, lm_params(args.tol, args.tol), repeat=args.repeat))
+        except (ValueError, FileNotFoundError) as exc:
+            rows.append((str(name), str(exc).splitlines()[0]))
+    print(format_lm_table(rows))
+    print(
+        f"\nLM: relativeErrorTol={args.tol:g}, absoluteErrorTol={args.tol:g}, maxIterations=1000, "
+        f"other GTSAM defaults; prior sigma {PRIOR_SIGMA:g} on the lowest id. "
+        f"optimize (s): median of {max(1, args.repeat)} run(s)."
+    )
+    return 0 if all(isinstance(r, tuple) or r.matches is not False for r in rows) else 1
+
+
+def _gtsam_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("gtsam")
+    except Exception:  # metadata missing in a source build
+        return "unknown"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
