@@ -344,3 +344,29 @@ def test_non_finite_graph_is_not_written(tiny_graph, tmp_path):
     with pytest.raises(GraphError, match="poses of vertex 10 is not finite"):
         write_g2o(tiny_graph.with_poses(poses), tmp_path / "nan.g2o")
     assert not (tmp_path / "nan.g2o").exists()
+
+
+@pytest.mark.parametrize("name", ["intel.g2o", "kitti_00.g2o", "sphere2500.g2o"])
+def test_matches_gtsam_reader(name, dataset_path):
+    """Same edges, measurements and information as GTSAM's readG2o (an independent parser)."""
+    gtsam = pytest.importorskip("gtsam")
+    from egnc.lie import se3
+
+    graph = read_g2o(dataset_path(name))
+    factors, _ = gtsam.readG2o(str(dataset_path(name)), graph.dim == 3)
+    assert factors.size() == graph.num_edges
+    # GTSAM orders 3D tangents rotation-first; g2o (and egnc) translation-first.
+    order = [0, 1, 2] if graph.dim == 2 else [3, 4, 5, 0, 1, 2]
+    for k in range(graph.num_edges):
+        factor = factors.at(k)
+        assert tuple(factor.keys()) == tuple(graph.vertex_ids[graph.edges[k]])
+        expected_information = graph.information[k][np.ix_(order, order)]
+        information = factor.noiseModel().information()
+        np.testing.assert_allclose(information, expected_information, rtol=1e-12, atol=0)
+        if graph.dim == 2:
+            measured = factor.measured()
+            assert [measured.x(), measured.y()] == graph.measurements[k, :2].tolist()
+        else:
+            np.testing.assert_allclose(
+                factor.measured().matrix(), se3.from_xyz_quat(graph.measurements[k]), atol=1e-12
+            )
