@@ -1,0 +1,120 @@
+"""Ground-truth outlier labels, kept in a JSON sidecar beside a pose-graph file.
+
+A corrupted g2o file must not reveal which of its edges are false, so the labels live in their own
+small file (`name.labels.json` next to `name.g2o` by convention):
+
+    {
+      "format": "egnc-labels-1",
+      "num_edges": 1234,
+      "outlier_edges": [17, 40, ...],
+      ...any further metadata (generator, seed, percent, ...)
+    }
+
+`outlier_edges` holds 0-based indices in the edge order of the pose-graph file, i.e. the order of
+`PoseGraph.edges` after `read_g2o`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from egnc.errors import EgncError
+
+LABELS_FORMAT = "egnc-labels-1"
+"""Value of the `format` key written by `write_labels` and required by `read_labels`."""
+
+_RESERVED_KEYS = ("format", "num_edges", "outlier_edges")
+
+
+def write_labels(path: str | Path, is_outlier: np.ndarray, meta: dict[str, Any] | None = None) -> None:
+    """Write the outlier labels of a graph's edges to a JSON sidecar, atomically.
+
+    Args:
+        path: file to write; it is replaced only once the new content is complete.
+        is_outlier: `(E,)` bool, true for the false edges, in the graph file's edge order.
+        meta: extra JSON-serializable entries stored after the reserved keys (which it must not
+            contain), e.g. the generator's seed and parameters.
+
+    Raises:
+        EgncError: `is_outlier` is not one-dimensional or `meta` uses a reserved key.
+    """
+    is_outlier = np.asarray(is_outlier)
+    if is_outlier.ndim != 1 or is_outlier.dtype != bool:
+        raise EgncError(f"is_outlier must be a 1-D bool array, got {is_outlier.dtype} {is_outlier.shape}")
+    meta = dict(meta or {})
+    clash = [key for key in _RESERVED_KEYS if key in meta]
+    if clash:
+        raise EgncError(f"labels metadata must not use the reserved keys {', '.join(clash)}")
+    content = {
+        "format": LABELS_FORMAT,
+        "num_edges": len(is_outlier),
+        "outlier_edges": np.flatnonzero(is_outlier).tolist(),
+        **meta,
+    }
+    # One key per line keeps the file readable and diff-friendly while the index list stays compact.
+    lines = [f"  {json.dumps(key)}: {json.dumps(value)}" for key, value in content.items()]
+    _write_atomic(Path(path), "{\n" + ",\n".join(lines) + "\n}\n")
+
+
+def read_labels(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
+    """Read a labels sidecar written by `write_labels`.
+
+    Args:
+        path: the JSON file.
+
+    Returns:
+        `(is_outlier, meta)`: `(E,)` bool outlier flags in file edge order, and the remaining
+        metadata (everything but the reserved keys).
+
+    Raises:
+        EgncError: the file is missing, not JSON, of another format, or its indices are invalid.
+    """
+    path = Path(path)
+    try:
+        content = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise EgncError(f"{path}: cannot read labels: {error.strerror or error}") from None
+    except json.JSONDecodeError as error:
+        raise EgncError(f"{path}:{error.lineno}: labels file is not valid JSON: {error.msg}") from None
+    if not isinstance(content, dict) or content.get("format") != LABELS_FORMAT:
+        raise EgncError(f"{path}: not an egnc labels file (expected \"format\": \"{LABELS_FORMAT}\")")
+    num_edges = content.get("num_edges")
+    indices = content.get("outlier_edges")
+    if not _is_int(num_edges) or num_edges < 0:
+        raise EgncError(f"{path}: num_edges must be a non-negative integer, got {num_edges!r}")
+    if not isinstance(indices, list) or not all(_is_int(index) for index in indices):
+        raise EgncError(f"{path}: outlier_edges must be a list of integers")
+    outlier_edges = np.array(indices, dtype=np.int64)
+    if len(outlier_edges) and (outlier_edges.min() < 0 or outlier_edges.max() >= num_edges):
+        raise EgncError(f"{path}: outlier_edges must lie in [0, num_edges = {num_edges})")
+    if len(np.unique(outlier_edges)) != len(outlier_edges):
+        raise EgncError(f"{path}: outlier_edges lists an edge more than once")
+    is_outlier = np.zeros(num_edges, dtype=bool)
+    is_outlier[outlier_edges] = True
+    meta = {key: value for key, value in content.items() if key not in _RESERVED_KEYS}
+    return is_outlier, meta
+
+
+def _is_int(value: object) -> bool:
+    """Whether a parsed JSON value is an integer (JSON booleans are not)."""
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write `text` to a fresh temporary file beside `path`, then rename it over `path`."""
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    # Mode 0o666 lets the umask decide the permissions, as for a plain open().
+    descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        with os.fdopen(descriptor, "w", encoding="utf-8", newline="\n") as stream:
+            stream.write(text)
+        os.replace(temporary, path)
+    except BaseException:
+        temporary.unlink(missing_ok=True)
+        raise
