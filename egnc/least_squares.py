@@ -1,0 +1,296 @@
+"""Sparse Gauss-Newton and Levenberg-Marquardt on pose graphs, with IRLS edge weights.
+
+Each iteration linearizes every edge (`egnc.factors`), assembles the normal equations with a
+fixed pattern (`egnc.normal_equations`), solves them with a sparse Cholesky (`egnc.linear_solvers`)
+and retracts the step onto the poses (`X <- X Exp(delta)`). Poses marked fixed, or pose 0 when
+none is, are held constant: this removes the gauge freedom.
+
+Robust losses enter by iteratively reweighted least squares: at the current residual norms `r`
+an `EdgeLoss` gives each edge its cost `rho(r)` and weight `w = rho'(r) / r`, and the step solves
+`(sum w J^T Omega J + lambda D) delta = -sum w J^T Omega e`.
+
+Levenberg-Marquardt follows Nielsen's damping update (as in Ceres and Madsen et al.): with the
+gain ratio `q = (F - F_new) / (L(0) - L(delta))`, where `L(0) - L(delta) = 0.5 delta^T (lambda D
+delta - g)` is the decrease predicted by the damped quadratic model, a step is accepted when
+`q > 1e-3`; then `lambda *= max(1/3, 1 - (2q - 1)^3)`, otherwise `lambda *= nu, nu *= 2`.
+`D = clip(diag(H), 1e-6, 1e32)` (Marquardt's scaling, Ceres's clip values).
+
+Termination (checked after each accepted step; `status` codes as in `STATUS_MESSAGES`):
+    1. converged: `(F_prev - F) <= rel_cost_tol * F_prev`;
+    2. converged: `max |g| <= gradient_tol` (at the current poses);
+    3. converged: `||delta|| <= step_tol` (tangent-space step, metres and radians mixed);
+    0. `max_iterations` accepted steps were taken;
+    4. no decrease possible (LM: `lambda > max_damping`; GN: the full step increased the cost).
+
+References:
+    K. Madsen, H. B. Nielsen, O. Tingleff, "Methods for non-linear least squares problems",
+    2004, section 3.2 (damping update, gain ratio).
+    S. Agarwal, K. Mierle et al., Ceres Solver, "Levenberg-Marquardt" trust-region strategy.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+import numpy as np
+
+from egnc.errors import SolverError
+from egnc.factors import BetweenFactors, group_of
+from egnc.graph import PoseGraph
+from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, make_linear_solver, resolve_name
+from egnc.normal_equations import NormalEquationsPattern
+
+STATUS_MESSAGES = {
+    0: "maximum number of iterations reached",
+    1: "converged: relative cost decrease below rel_cost_tol",
+    2: "converged: gradient below gradient_tol",
+    3: "converged: step below step_tol",
+    4: "stopped: no step decreases the cost",
+}
+CONVERGED = (1, 2, 3)
+DAMPING_MIN_FACTOR = 0.1  # largest shrink of lambda per accepted step, as GTSAM's factor 10
+
+
+class EdgeLoss(Protocol):
+    """Per-edge cost and IRLS weight as functions of the whitened residual norms `r` `(E,)`."""
+
+    def cost(self, r: np.ndarray) -> np.ndarray:
+        """Per-edge cost `rho(r)` `(E,)`; for least squares `0.5 r^2`."""
+        ...
+
+    def weight(self, r: np.ndarray) -> np.ndarray:
+        """Per-edge IRLS weight `rho'(r) / r` `(E,)`."""
+        ...
+
+
+class QuadraticLoss:
+    """Plain least squares: `rho(r) = 0.5 r^2`, weight 1."""
+
+    def cost(self, r: np.ndarray) -> np.ndarray:
+        return 0.5 * r * r
+
+    def weight(self, r: np.ndarray) -> np.ndarray:
+        return np.ones_like(r)
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Options of the nonlinear least-squares solve.
+
+    Attributes:
+        method: `"lm"` (Levenberg-Marquardt) or `"gn"` (Gauss-Newton, full steps).
+        max_iterations: maximum number of accepted steps.
+        rel_cost_tol: stop when `(F_prev - F) / F_prev <= rel_cost_tol` after an accepted step.
+        gradient_tol: stop when the largest gradient component `max |g| <= gradient_tol`.
+        step_tol: stop when the step's Euclidean norm `||delta|| <= step_tol`.
+        initial_damping: LM's starting `lambda` (Ceres: 1 / initial trust-region radius 1e4).
+        max_damping: LM gives up (status 4) when `lambda` exceeds this.
+    """
+
+    method: Literal["lm", "gn"] = "lm"
+    max_iterations: int = 100
+    rel_cost_tol: float = 1e-10
+    gradient_tol: float = 1e-10
+    step_tol: float = 1e-12
+    initial_damping: float = 1e-8
+    max_damping: float = 1e32
+
+    def __post_init__(self) -> None:
+        if self.method not in ("lm", "gn"):
+            raise SolverError(f"unknown method {self.method!r}: choose 'lm' or 'gn'")
+        if self.max_iterations < 0:
+            raise SolverError(f"max_iterations must be >= 0, got {self.max_iterations}")
+
+
+@dataclass(frozen=True, eq=False)
+class SolverResult:
+    """Outcome of one nonlinear least-squares solve.
+
+    Attributes:
+        poses: `(N, n, n)` optimized pose matrices.
+        residual_norms: `(E,)` whitened residual norms `r` at the solution (unweighted).
+        cost: final total cost `sum rho(r)`.
+        cost_history: `(K + 1,)` cost before the first and after each accepted step.
+        iterations: accepted steps K.
+        linear_solves: factorizations performed (rejected LM steps included).
+        status: termination code, see `STATUS_MESSAGES`.
+        message: human-readable termination reason.
+        time_s: wall time of the solve in seconds.
+        timings: seconds spent in `"linearize"` (residuals and Jacobians), `"assemble"`,
+            `"factorize"` (factorization and solve) and `"update"` (retraction and cost).
+    """
+
+    poses: np.ndarray
+    residual_norms: np.ndarray
+    cost: float
+    cost_history: np.ndarray
+    iterations: int
+    linear_solves: int
+    status: int
+    message: str
+    time_s: float
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def converged(self) -> bool:
+        """Whether a convergence criterion (status 1, 2 or 3) stopped the solve."""
+        return self.status in CONVERGED
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A graph's factors with its normal-equations pattern and linear solver, built once.
+
+    Reusing one `Problem` across solves (e.g. GNC stages) reuses the symbolic factorization.
+    """
+
+    graph: PoseGraph
+    factors: BetweenFactors
+    pattern: NormalEquationsPattern
+    linear_solver: LinearSolver
+
+    @classmethod
+    def from_graph(cls, graph: PoseGraph, linear_solver: str = "auto") -> Problem:
+        """Prepare `graph` for solving; the gauge is fixed on pose 0 unless some poses are fixed."""
+        backend = resolve_name(linear_solver)
+        fixed = graph.fixed.copy()
+        if not fixed.any():
+            fixed[0] = True
+        pattern = NormalEquationsPattern.build(
+            graph.edges, fixed, graph.tangent_dim, lower_only=backend == "cholmod"
+        )
+        solver = make_linear_solver(backend, pattern.indptr, pattern.indices)
+        return cls(graph, BetweenFactors.from_graph(graph), pattern, solver)
+
+    def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
+        group = group_of(self.graph.dim)
+        free = self.pattern.free_index >= 0
+        moved = T.copy()
+        moved[free] = group.rplus(T[free], step.reshape(-1, self.graph.tangent_dim))
+        return moved
+
+
+class _Clock:
+    """Accumulates wall time per named phase."""
+
+    def __init__(self) -> None:
+        self.totals = {"linearize": 0.0, "assemble": 0.0, "factorize": 0.0, "update": 0.0}
+        self._phase = ""
+        self._start = 0.0
+
+    def __call__(self, phase: str) -> _Clock:
+        self._phase = phase
+        return self
+
+    def __enter__(self) -> None:
+        self._start = time.perf_counter()
+
+    def __exit__(self, *exc: object) -> None:
+        self.totals[self._phase] += time.perf_counter() - self._start
+
+
+def solve_least_squares(
+    problem: Problem,
+    initial_poses: np.ndarray,
+    loss: EdgeLoss | None = None,
+    options: SolverOptions = SolverOptions(),
+) -> SolverResult:
+    """Minimize `sum rho(r_e)` over the free poses by GN or LM with IRLS weights.
+
+    Args:
+        problem: factors, pattern and linear solver (see `Problem.from_graph`).
+        initial_poses: `(N, n, n)` starting pose matrices.
+        loss: per-edge cost and weight; `None` means plain least squares.
+        options: solver options.
+
+    Returns:
+        The `SolverResult`; it is returned (not raised) when the iteration limit is hit.
+    """
+    loss = loss or QuadraticLoss()
+    started = time.perf_counter()
+    clock = _Clock()
+    factors, pattern = problem.factors, problem.pattern
+    T = np.array(initial_poses, dtype=np.float64)
+
+    def linearize(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        with clock("linearize"):
+            linearization = factors.linearize(poses)
+            r = factors.whitened_norms(linearization.residuals)
+        with clock("assemble"):
+            data, gradient = pattern.assemble(linearization, factors.information, loss.weight(r))
+        return data, gradient, r, float(np.sum(loss.cost(r)))
+
+    data, gradient, r, cost = linearize(T)
+    history = [cost]
+    damping, growth = options.initial_damping, 2.0
+    iterations = linear_solves = 0
+    status = 0
+    while iterations < options.max_iterations:
+        if np.max(np.abs(gradient), initial=0.0) <= options.gradient_tol:
+            status = 2
+            break
+        diagonal = np.clip(data[pattern.diagonal_slots], 1e-6, 1e32)
+        use_damping = options.method == "lm"
+        with clock("factorize"):
+            damped = data.copy()
+            if use_damping:
+                damped[pattern.diagonal_slots] += damping * diagonal
+            try:
+                step = -problem.linear_solver.solve(damped, gradient)
+                solved = bool(np.all(np.isfinite(step)))
+            except NotPositiveDefiniteError:
+                if not use_damping:
+                    raise
+                solved = False
+            linear_solves += 1
+        if not solved:
+            if not use_damping:
+                raise SolverError("Gauss-Newton step is not finite: the normal equations are singular")
+            damping, growth = damping * growth, growth * 2
+            if damping > options.max_damping:
+                status = 4
+                break
+            continue
+        if np.linalg.norm(step) <= options.step_tol:
+            status = 3
+            break
+        with clock("update"):
+            T_new = problem.retract(T, step)
+            cost_new = float(np.sum(loss.cost(factors.whitened_norms(factors.residuals(T_new)))))
+        predicted = 0.5 * float(step @ ((damping * diagonal * step if use_damping else 0.0) - gradient))
+        gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        if use_damping and gain <= 1e-3:
+            damping, growth = damping * growth, growth * 2
+            if damping > options.max_damping:
+                status = 4
+                break
+            continue
+        if not use_damping and not cost_new < cost:
+            status = 4
+            break
+        if use_damping:
+            damping *= max(DAMPING_MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
+            growth = 2.0
+        previous = cost
+        T = T_new
+        data, gradient, r, cost = linearize(T)
+        history.append(cost)
+        iterations += 1
+        if previous - cost <= options.rel_cost_tol * previous:
+            status = 1
+            break
+    return SolverResult(
+        poses=T,
+        residual_norms=r,
+        cost=cost,
+        cost_history=np.array(history),
+        iterations=iterations,
+        linear_solves=linear_solves,
+        status=status,
+        message=STATUS_MESSAGES[status],
+        time_s=time.perf_counter() - started,
+        timings=dict(clock.totals),
+    )
