@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import egnc.io.atomic as atomic_module
 import egnc.io.g2o as g2o_module
-from egnc.errors import G2oFormatError, GraphError
+from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import PoseGraph
 from egnc.initialize import spanning_tree
 from egnc.io import read_g2o, write_g2o
@@ -332,8 +333,8 @@ def test_failed_replace_removes_temporary(tiny_graph, tmp_path, monkeypatch):
     def refuse(src, dst):
         raise OSError("replace refused")
 
-    monkeypatch.setattr(g2o_module.os, "replace", refuse)
-    with pytest.raises(OSError, match="replace refused"):
+    monkeypatch.setattr(atomic_module.os, "replace", refuse)
+    with pytest.raises(EgncError, match=r"new\.g2o: cannot write file: replace refused"):
         write_g2o(tiny_graph, tmp_path / "new.g2o")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["graph.g2o"]
 

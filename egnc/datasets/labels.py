@@ -17,14 +17,13 @@ small file (`name.labels.json` next to `name.g2o` by convention):
 from __future__ import annotations
 
 import json
-import os
-import secrets
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from egnc.errors import EgncError
+from egnc.io.atomic import atomic_text_file
 
 LABELS_FORMAT = "egnc-labels-1"
 """Value of the `format` key written by `write_labels` and required by `read_labels`."""
@@ -59,7 +58,8 @@ def write_labels(path: str | Path, is_outlier: np.ndarray, meta: dict[str, Any] 
     }
     # One key per line keeps the file readable and diff-friendly while the index list stays compact.
     lines = [f"  {json.dumps(key)}: {json.dumps(value)}" for key, value in content.items()]
-    _write_atomic(Path(path), "{\n" + ",\n".join(lines) + "\n}\n")
+    with atomic_text_file(Path(path)) as out:
+        out.write("{\n" + ",\n".join(lines) + "\n}\n")
 
 
 def read_labels(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
@@ -104,17 +104,3 @@ def read_labels(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
 def _is_int(value: object) -> bool:
     """Whether a parsed JSON value is an integer (JSON booleans are not)."""
     return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Write `text` to a fresh temporary file beside `path`, then rename it over `path`."""
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    # Mode 0o666 lets the umask decide the permissions, as for a plain open().
-    descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(descriptor, "w", encoding="utf-8", newline="\n") as stream:
-            stream.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        temporary.unlink(missing_ok=True)
-        raise

@@ -19,18 +19,15 @@ line get their initial guess from `egnc.initialize`.
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import os
-import secrets
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
 from egnc.connectivity import require_connected
+from egnc.io.atomic import atomic_text_file
 from egnc.errors import G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
@@ -191,7 +188,7 @@ def write_g2o(
     _check_writable(graph)
     vertex_tag, edge_tag = _VERTEX_TAGS[graph.dim], _EDGE_TAGS[graph.dim]
     rows_upper, cols_upper = np.triu_indices(graph.tangent_dim)
-    with _atomic_text_file(Path(path)) as out:
+    with atomic_text_file(Path(path)) as out:
         out.write(_format_records(vertex_tag.name, graph.vertex_ids[:, None], graph.poses))
         out.write("".join(f"{_FIX} {i}\n" for i in graph.vertex_ids[graph.fixed].tolist()))
         edge_values = np.concatenate(
@@ -425,21 +422,3 @@ def _format_records(tag: str, ids: np.ndarray, values: np.ndarray) -> str:
         f"{tag} {' '.join(map(str, row_ids))} {' '.join(map(repr, row_values))}\n"
         for row_ids, row_values in zip(ids.tolist(), values.tolist())
     )
-
-
-@contextlib.contextmanager
-def _atomic_text_file(path: Path) -> Iterator[TextIO]:
-    """Yield a temporary file beside `path` that replaces `path` only if the block succeeds."""
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    # os.open with mode 0o666 lets the umask decide permissions, as for a plain open().
-    descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(descriptor, "w", encoding="utf-8", newline="\n") as out:
-            yield out
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temporary)
-        raise
