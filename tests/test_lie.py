@@ -27,6 +27,8 @@ BATCH_SHAPES = [(), (1,), (3, 2)]
 KINDS = ["uniform", "tangent", "near_identity", "edge"]
 # 1e-12 is tiny but nonzero: the closed-form coefficients cancel completely there (f_5 ~ 1e23).
 EDGE_ANGLES = (0.0, 1e-12, np.pi - 1e-9, np.pi)
+# Coordinate axes and one oblique unit axis, for the fixed edge cases.
+UNIT_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -2.0, 2.0]]) / [[1], [1], [1], [3]]
 PROPERTY = settings(max_examples=25, deadline=None)
 
 seeds = st.integers(0, 2**32 - 1)
@@ -198,7 +200,7 @@ def test_rplus_rminus_round_trip(name, seed, kind, shape):
 
 @pytest.mark.parametrize("angle", EDGE_ANGLES)
 def test_so3_log_at_edge_angles(angle):
-    axes = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, -2.0, 2.0]]) / [[1], [1], [1], [3]]
+    axes = UNIT_AXES
     w = so3.log(so3.exp(angle * axes))
     assert np.all(np.isfinite(w))
     assert_close(np.linalg.norm(w, axis=-1), angle, atol=1e-15)
@@ -312,7 +314,7 @@ def test_quaternion_round_trip(seed, shape):
 
 @pytest.mark.parametrize("angle", EDGE_ANGLES)
 def test_quaternion_at_edge_angles_has_no_nan(angle):
-    axes = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [2.0, 1.0, -2.0]]) / [[1], [1], [1], [3]]
+    axes = UNIT_AXES
     R = so3.exp(angle * axes)
     q = so3.to_quaternion(R)
     assert np.all(np.isfinite(q)) and np.all(q[..., 3] >= 0.0)

@@ -74,7 +74,8 @@ def matvec(a: np.ndarray, v: np.ndarray) -> np.ndarray:
 def hat(w: np.ndarray) -> np.ndarray:
     """Return `[w]x`, component-first: `(3, ...) -> (3, 3, ...)`."""
     zero = np.zeros_like(w[0])
-    return np.stack([np.stack([zero, -w[2], w[1]]), np.stack([w[2], zero, -w[0]]), np.stack([-w[1], w[0], zero])])
+    rows = [[zero, -w[2], w[1]], [w[2], zero, -w[0]], [-w[1], w[0], zero]]
+    return np.stack([np.stack(row) for row in rows])
 
 
 def skew_poly(w: np.ndarray, a, b) -> np.ndarray:
@@ -116,7 +117,9 @@ def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:
     def pick(if_w, if_x, if_y, if_z):
         return np.where(use_w, if_w, np.where(use_x, if_x, np.where(use_y, if_y, if_z)))
 
-    q = np.stack([pick(dx, tx, sxy, sxz), pick(dy, sxy, ty, syz), pick(dz, sxz, syz, tz), pick(tw, dx, dy, dz)])
+    q = np.stack(
+        [pick(dx, tx, sxy, sxz), pick(dy, sxy, ty, syz), pick(dz, sxz, syz, tz), pick(tw, dx, dy, dz)]
+    )
     # The sign flip for qw >= 0 rides along with the normalization.
     q *= np.where(q[3] < 0.0, -1.0, 1.0) / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     return q

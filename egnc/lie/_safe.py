@@ -92,7 +92,12 @@ def trig_coefficients(
 
 
 def jacobian_inverse_coefficient(
-    theta2: np.ndarray, f1: np.ndarray, f2: np.ndarray, f3: np.ndarray, sin_half: np.ndarray, cos_half: np.ndarray
+    theta2: np.ndarray,
+    f1: np.ndarray,
+    f2: np.ndarray,
+    f3: np.ndarray,
+    sin_half: np.ndarray,
+    cos_half: np.ndarray,
 ) -> np.ndarray:
     """Return `g = 1/t^2 - (1 + cos t) / (2 t sin t)`, the `[w]x^2` coefficient of SO(3) Jr^-1.
 

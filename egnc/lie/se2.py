@@ -49,9 +49,9 @@ def _pose(cos_t, sin_t, tx, ty) -> np.ndarray:
 
 
 def _split_pose(T) -> tuple[np.ndarray, np.ndarray]:
-    """Return component-first views `(R (2, 2, ...), t (2, ...))` of poses `(..., 3, 3)`."""
-    T = split(T, 2)
-    return T[:2, :2], T[:2, 2]
+    """Return component-first copies `(R (2, 2, ...), t (2, ...))` of poses `(..., 3, 3)`."""
+    top = split(T[..., :2, :], 2)  # the bottom row is constant: skip copying it
+    return top[:, :2], top[:, 2]
 
 
 def _matrix3(rows) -> np.ndarray:
@@ -78,7 +78,7 @@ def to_xytheta(T) -> np.ndarray:
 
 
 def hat(xi) -> np.ndarray:
-    """Return the Lie-algebra matrix `[[0, -w, v_x], [w, 0, v_y], [0, 0, 0]]` (Sola eq. 153): `(..., 3) -> (..., 3, 3)`."""
+    """Return `[[0, -w, v_x], [w, 0, v_y], [0, 0, 0]]` (Sola eq. 153): `(..., 3) -> (..., 3, 3)`."""
     vx, vy, w = split(as_float_array(xi, (3,), "xi"), 1)
     zero = np.zeros_like(w)
     return _matrix3([[zero, -w, vx], [w, zero, vy], [zero, zero, zero]])
@@ -113,7 +113,7 @@ def log(T) -> np.ndarray:
 
 
 def _half_angle_cot(theta2, f1, f2, f3, sin_half, cos_half) -> np.ndarray:
-    """Return `(t/2) cot(t/2) = 1 - t^2 g`, g as in `jacobian_inverse_coefficient` (>= 0 for t <= pi). Shape `(...)`."""
+    """Return `(t/2) cot(t/2) = 1 - t^2 g`, g from `jacobian_inverse_coefficient`. Shape `(...)`."""
     return 1.0 - theta2 * jacobian_inverse_coefficient(theta2, f1, f2, f3, sin_half, cos_half)
 
 

@@ -57,7 +57,7 @@ def _pose(r: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _split_pose(T) -> tuple[np.ndarray, np.ndarray]:
-    """Return component-first views `(R (3, 3, ...), t (3, ...))` of poses `(..., 4, 4)`."""
+    """Return component-first copies `(R (3, 3, ...), t (3, ...))` of poses `(..., 4, 4)`."""
     top = split(T[..., :3, :], 2)  # the bottom row is constant: skip copying it
     return top[:, :3], top[:, 3]
 
@@ -174,7 +174,10 @@ def _q_block(v: np.ndarray, w: np.ndarray, f3: np.ndarray, f4: np.ndarray, f5: n
 
 
 def right_jacobian(xi) -> np.ndarray:
-    """Return `Jr([v, w]) = [[Jr(w), Q(-v, -w)], [0, Jr(w)]]` (Sola eqs. 179-180, Jr(xi) = Jl(-xi)): `(..., 6) -> (..., 6, 6)`."""
+    """Return `Jr([v, w]) = Jl(-[v, w]) = [[Jr(w), Q(-v, -w)], [0, Jr(w)]]` (Sola eqs. 179-180).
+
+    Shapes: `(..., 6) -> (..., 6, 6)`.
+    """
     xi = split(as_float_array(xi, (6,), "xi"), 1)
     v, w = xi[:3], xi[3:]
     theta2 = sq_norm(w)
@@ -188,7 +191,10 @@ def right_jacobian(xi) -> np.ndarray:
 
 
 def right_jacobian_inverse(xi) -> np.ndarray:
-    """Return `Jr(xi)^-1 = [[Jr(w)^-1, -Jr(w)^-1 Q Jr(w)^-1], [0, Jr(w)^-1]]`, Q as in `right_jacobian`: `(..., 6) -> (..., 6, 6)`."""
+    """Return `Jr(xi)^-1 = [[Jr(w)^-1, -Jr(w)^-1 Q Jr(w)^-1], [0, Jr(w)^-1]]`, Q as in `right_jacobian`.
+
+    Shapes: `(..., 6) -> (..., 6, 6)`.
+    """
     xi = split(as_float_array(xi, (6,), "xi"), 1)
     v, w = xi[:3], xi[3:]
     theta2 = sq_norm(w)
@@ -213,7 +219,7 @@ def rminus(A, B) -> np.ndarray:
 
 
 def from_xyz_quat(a) -> np.ndarray:
-    """Return poses from `[x, y, z, qx, qy, qz, qw]` (g2o order; quaternion normalized): `(..., 7) -> (..., 4, 4)`."""
+    """Return poses from g2o's `[x, y, z, qx, qy, qz, qw]` (q normalized): `(..., 7) -> (..., 4, 4)`."""
     a = as_float_array(a, (7,), "a")
     return _pose(split(from_quaternion(a[..., 3:]), 2), split(a[..., :3], 1))
 

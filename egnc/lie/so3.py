@@ -61,7 +61,10 @@ def vee(W) -> np.ndarray:
 
 
 def exp(omega) -> np.ndarray:
-    """Return `Exp(w) = I + sin(t)/t [w]x + (1 - cos t)/t^2 [w]x^2` (Sola eq. 132): `(..., 3) -> (..., 3, 3)`."""
+    """Return `Exp(w) = I + sin(t)/t [w]x + (1 - cos t)/t^2 [w]x^2` (Sola eq. 132).
+
+    Shapes: `(..., 3) -> (..., 3, 3)`; `t = |w|`.
+    """
     w = split(as_float_array(omega, (3,), "omega"), 1)
     theta2 = sq_norm(w)
     f1, f2 = trig_coefficients(theta2, 2, *sincos_half(theta2))
@@ -69,7 +72,7 @@ def exp(omega) -> np.ndarray:
 
 
 def log(R) -> np.ndarray:
-    """Return `Log(R)` with angle in [0, pi], via the quaternion (accurate near pi): `(..., 3, 3) -> (..., 3)`."""
+    """Return `Log(R)`, angle in [0, pi], via the quaternion (accurate near pi): `(..., 3, 3) -> (..., 3)`."""
     return join(rotation_log(split(as_float_array(R, (3, 3), "R"), 2))[0], 1)
 
 
@@ -148,5 +151,5 @@ def from_quaternion(q) -> np.ndarray:
 
 
 def to_quaternion(R) -> np.ndarray:
-    """Return unit quaternions `[qx, qy, qz, qw]` with `qw >= 0` (Shepperd's method): `(..., 3, 3) -> (..., 4)`."""
+    """Return unit quaternions `[qx, qy, qz, qw]`, `qw >= 0` (Shepperd's method): `(..., 3, 3) -> (..., 4)`."""
     return join(rotation_to_quaternion(split(as_float_array(R, (3, 3), "R"), 2)), 1)
