@@ -42,12 +42,25 @@ def build_parser() -> argparse.ArgumentParser:
         help="sparse backend: CHOLMOD (needs egnc[cholmod]) or SciPy's SuperLU; auto picks CHOLMOD if present",
     )
     parser.add_argument("--solver", choices=("lm", "gn"), default="lm", help="Levenberg-Marquardt or Gauss-Newton")
-    parser.add_argument("--max-iters", type=int, default=100, help="maximum solver iterations (default 100)")
+    parser.add_argument(
+        "--max-iters", type=_non_negative_int, default=100, help="maximum solver iterations (default 100)"
+    )
     parser.add_argument("--skip-unknown", action="store_true", help="ignore lines with unknown g2o tags")
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     parser.add_argument("--version", action="version", version=f"egnc {__version__}")
     return parser
+
+
+def _non_negative_int(text: str) -> int:
+    """Parse an integer >= 0; anything else is a usage error (exit 2), not a solver error."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return value
 
 
 def report_dict(result: Result) -> dict:
@@ -88,6 +101,7 @@ def summary(result: Result) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `egnc-solve`; returns the process exit code."""
     args = build_parser().parse_args(argv)
+    written: list[Path] = []
     try:
         graph = read_g2o(args.input, skip_unknown=args.skip_unknown)
         result = solve(
@@ -98,10 +112,14 @@ def main(argv: list[str] | None = None) -> int:
         )
         if args.output is not None:
             write_g2o(result.graph, args.output)
+            written.append(args.output)
         if args.report is not None:
             with atomic_text_file(args.report) as out:
                 out.write(json.dumps(report_dict(result), indent=2) + "\n")
     except EgncError as error:
+        # A failed run leaves no output behind, not even a graph written before the report failed.
+        for path in written:
+            path.unlink(missing_ok=True)
         print(f"egnc-solve: error: {error}", file=sys.stderr)
         return 1
     if not args.quiet:
