@@ -1,7 +1,34 @@
-"""egnc: robust pose-graph optimization with Efficient Graduated Non-Convexity."""
+"""egnc: robust pose-graph optimization with Efficient Graduated Non-Convexity.
 
+Public API: `solve` a pose graph (or a g2o file) into a `Result`; `read_g2o` / `write_g2o`;
+`SolverOptions`; the `PoseGraph` container; the `EgncError` hierarchy.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+from egnc.api import Result, StageReport, solve
 from egnc.errors import EgncError, G2oFormatError, GraphError, SolverError
+from egnc.graph import PoseGraph
+from egnc.io import read_g2o, write_g2o
+from egnc.least_squares import SolverOptions
 
-__version__ = "0.1.0"
+try:
+    # pyproject.toml is the one place the version is written; installs record it in the metadata.
+    __version__ = version("egnc")
+except PackageNotFoundError:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
 
-__all__ = ["EgncError", "G2oFormatError", "GraphError", "SolverError", "__version__"]
+__all__ = [
+    "EgncError",
+    "G2oFormatError",
+    "GraphError",
+    "PoseGraph",
+    "Result",
+    "SolverError",
+    "SolverOptions",
+    "StageReport",
+    "__version__",
+    "read_g2o",
+    "solve",
+    "write_g2o",
+]
