@@ -8,37 +8,16 @@ from pathlib import Path
 
 import numpy as np
 
-from egnc.errors import EgncError
 from egnc.factors import from_matrices, to_matrices
+from egnc.gnc import GncOptions, StageReport, classify_inliers, known_inlier_mask, run_gnc
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
+from egnc.connectivity import connected_components
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import resolve_name
+from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 
-METHODS = ("l2",)
-"""Names accepted by `solve(method=...)`."""
-
-
-@dataclass(frozen=True, eq=False)
-class StageReport:
-    """Summary of one solve stage (one GNC stage, or the single stage of a non-graduated method).
-
-    Attributes:
-        mu_min, mu_mean, mu_max: statistics of the loop closures' kernel parameter in the stage
-            (0 for least squares).
-        iterations: accepted solver steps.
-        cost: cost at the end of the stage.
-        time_s: wall time of the stage in seconds.
-        status: solver termination code of the stage (see `egnc.least_squares.STATUS_MESSAGES`).
-    """
-
-    mu_min: float
-    mu_mean: float
-    mu_max: float
-    iterations: int
-    cost: float
-    time_s: float
-    status: int
+__all__ = ["METHODS", "Result", "StageReport", "solve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,12 +29,20 @@ class Result:
         method: the method used.
         linear_solver: the linear backend used, `"cholmod"` or `"scipy"`.
         residual_norms: `(E,)` whitened residual norms `r` at the solution (never kernel-scaled).
+        weights: `(E,)` IRLS weight of each edge at the end of the last GNC stage (1 for known
+            inliers and least squares).
+        mu: `(E,)` final kernel parameter of each edge (nan for known inliers and for kernels
+            without one).
+        known_inliers: `(E,)` bool, edges held quadratic (odometry by default).
+        inliers: `(E,)` bool, false for the loop closures rejected as outliers
+            (`r^2 > chi2.ppf(0.95, d)` after the last stage).
         initial_cost: least-squares cost `0.5 sum r^2` at the initial guess.
-        cost: least-squares cost `0.5 sum r^2` at the solution.
+        cost: least-squares cost `0.5 sum r^2` at the solution, over all edges.
         iterations: accepted solver steps over all stages.
-        stages: per-stage reports.
+        stages: per-stage reports; with `GncOptions.refine`, the last one is the least-squares
+            refinement on the accepted edges (its `mu` statistics are nan).
         status: termination code of the last stage (1, 2, 3 mean converged).
-        message: termination reason of the last stage.
+        message: termination reason.
         time_s: wall time in seconds, from graph to result.
         timings: seconds per solver phase, summed over stages.
     """
@@ -64,6 +51,10 @@ class Result:
     method: str
     linear_solver: str
     residual_norms: np.ndarray
+    weights: np.ndarray
+    mu: np.ndarray
+    known_inliers: np.ndarray
+    inliers: np.ndarray
     initial_cost: float
     cost: float
     iterations: int
@@ -78,47 +69,73 @@ class Result:
         """Whether the last stage stopped on a convergence criterion."""
         return self.status in (1, 2, 3)
 
+    @property
+    def rejected_edges(self) -> np.ndarray:
+        """0-based indices, in input-file order, of the edges rejected as outliers."""
+        return np.flatnonzero(~self.inliers)
+
 
 def solve(
     graph: PoseGraph | str | Path,
-    method: str = "l2",
+    method: str = "egnc",
     *,
+    known_inliers: str | np.ndarray = "odometry",
     linear_solver: str = "auto",
     options: SolverOptions | None = None,
+    gnc_options: GncOptions | None = None,
 ) -> Result:
-    """Optimize a pose graph.
+    """Optimize a pose graph, rejecting false loop closures with a robust method.
 
     Args:
         graph: a `PoseGraph`, or the path of a g2o file to read.
-        method: one of `METHODS`.
+        method: one of `METHODS`: `"egnc"` (default), `"risam"`, `"gnc-gm"`, `"gnc-tls"`,
+            `"huber"`, `"cauchy"`, `"gm"` or `"l2"` (plain least squares).
+        known_inliers: edges that stay quadratic: `"odometry"` (consecutive ids, default),
+            `"none"`, or an `(E,)` bool mask.
         linear_solver: `"auto"` (CHOLMOD when scikit-sparse is importable, else SciPy),
             `"cholmod"` or `"scipy"`.
-        options: solver options (GN or LM, tolerances, iteration limit).
+        options: options of each stage's GN/LM solve (tolerances, iteration limit).
+        gnc_options: kernel shape, threshold convention, outlier quantile, stage limit.
 
     Returns:
         The `Result`, whose `graph` holds the optimized poses.
     """
     started = time.perf_counter()
-    if method not in METHODS:
-        raise EgncError(f"unknown method {method!r}: choose one of {', '.join(METHODS)}")
+    options = options or SolverOptions()
+    gnc_options = gnc_options or GncOptions()
     if not isinstance(graph, PoseGraph):
         graph = read_g2o(graph)
-    options = options or SolverOptions()
+    known = known_inlier_mask(graph, known_inliers)
+    robust = ~known
+    schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)  # type: ignore[arg-type]
     backend = resolve_name(linear_solver)
     problem = Problem.from_graph(graph, backend)
-    solution = solve_least_squares(problem, to_matrices(graph.dim, graph.poses), None, options)
-    stage = StageReport(0.0, 0.0, 0.0, solution.iterations, solution.cost, solution.time_s, solution.status)
+    initial = to_matrices(graph.dim, graph.poses)
+    initial_r = problem.factors.whitened_norms(problem.factors.residuals(initial))
+    outcome = run_gnc(problem, initial, schedule, robust, options, gnc_options.max_stages)
+    inliers = classify_inliers(outcome.residual_norms, robust, graph.tangent_dim, gnc_options.outlier_quantile)
+    poses, stages = outcome.poses, outcome.stages
+    refine = gnc_options.refine and method in GRADUATED_METHODS and not inliers.all()
+    if refine and connected_components(graph.num_poses, graph.edges[inliers])[0] == 1:
+        refined = solve_least_squares(Problem.from_graph(graph.subgraph_edges(inliers), backend), poses, None, options)
+        poses = refined.poses
+        stages += (StageReport(np.nan, np.nan, np.nan, refined.iterations, refined.cost, refined.time_s, refined.status),)
+    r = problem.factors.whitened_norms(problem.factors.residuals(poses))
     return Result(
-        graph=graph.with_poses(from_matrices(graph.dim, solution.poses)),
+        graph=graph.with_poses(from_matrices(graph.dim, poses)),
         method=method,
         linear_solver=backend,
-        residual_norms=solution.residual_norms,
-        initial_cost=float(solution.cost_history[0]),
-        cost=solution.cost,
-        iterations=solution.iterations,
-        stages=(stage,),
-        status=solution.status,
-        message=solution.message,
+        residual_norms=r,
+        weights=outcome.weights,
+        mu=outcome.mu,
+        known_inliers=known,
+        inliers=inliers,
+        initial_cost=float(0.5 * np.sum(initial_r**2)),
+        cost=float(0.5 * np.sum(r**2)),
+        iterations=sum(stage.iterations for stage in stages),
+        stages=stages,
+        status=outcome.status,
+        message=outcome.message,
         time_s=time.perf_counter() - started,
-        timings=solution.timings,
+        timings=outcome.timings,
     )

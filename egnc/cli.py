@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -20,7 +21,9 @@ from egnc.least_squares import SolverOptions
 
 EXAMPLES = """examples:
   egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o
-  egnc-solve graph.g2o --method l2 --linear-solver scipy --report report.json
+  egnc-solve graph.g2o --method risam --report report.json
+  egnc-solve graph.g2o --drop-outliers -o inliers_only.g2o
+  egnc-solve graph.g2o --method l2 --linear-solver scipy
 """
 
 
@@ -34,7 +37,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("input", type=Path, help="input pose graph (.g2o)")
     parser.add_argument("-o", "--output", type=Path, help="write the optimized graph here (.g2o)")
-    parser.add_argument("--method", choices=METHODS, default=METHODS[0], help="optimization method")
+    parser.add_argument(
+        "--method",
+        choices=METHODS,
+        default="egnc",
+        help="egnc (default), the riSAM or GNC-GM/TLS schedules, a fixed kernel, or l2 (plain least squares)",
+    )
+    parser.add_argument(
+        "--known-inliers",
+        choices=("odometry", "none"),
+        default="odometry",
+        help="edges never rejected: odometry (consecutive ids, default) or none",
+    )
+    parser.add_argument(
+        "--drop-outliers", action="store_true", help="write the output graph without the rejected loop closures"
+    )
     parser.add_argument(
         "--linear-solver",
         choices=("auto", "cholmod", "scipy"),
@@ -79,8 +96,27 @@ def report_dict(result: Result) -> dict:
         "poses": graph.num_poses,
         "edges": graph.num_edges,
         "loop_closures": int(graph.is_loop_closure.sum()),
+        "known_inliers": int(result.known_inliers.sum()),
+        "rejected_edges": result.rejected_edges.tolist(),
+        "stages": [
+            {
+                "mu_min": _finite_or_none(stage.mu_min),
+                "mu_mean": _finite_or_none(stage.mu_mean),
+                "mu_max": _finite_or_none(stage.mu_max),
+                "iterations": stage.iterations,
+                "cost": stage.cost,
+                "time_s": stage.time_s,
+                "status": stage.status,
+            }
+            for stage in result.stages
+        ],
         "timings_s": result.timings,
     }
+
+
+def _finite_or_none(value: float) -> float | None:
+    """JSON has no NaN: statistics that do not apply become null."""
+    return value if math.isfinite(value) else None
 
 
 def summary(result: Result) -> str:
@@ -91,8 +127,10 @@ def summary(result: Result) -> str:
             f"poses {graph.num_poses}, edges {graph.num_edges}, loop closures {int(graph.is_loop_closure.sum())}"
             f" ({graph.dim}D)",
             f"method {result.method}, linear solver {result.linear_solver}",
-            f"cost {result.initial_cost:.10g} -> {result.cost:.10g} in {result.iterations} iterations"
-            f" ({result.message})",
+            f"cost {result.initial_cost:.10g} -> {result.cost:.10g} in {len(result.stages)} stages,"
+            f" {result.iterations} iterations ({result.message})",
+            f"rejected {len(result.rejected_edges)} of {int((~result.known_inliers).sum())} loop closures"
+            f" (candidates: edges not known inliers)",
             f"time {result.time_s:.3f} s",
         ]
     )
@@ -107,11 +145,12 @@ def main(argv: list[str] | None = None) -> int:
         result = solve(
             graph,
             args.method,
+            known_inliers=args.known_inliers,
             linear_solver=args.linear_solver,
             options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
         )
         if args.output is not None:
-            write_g2o(result.graph, args.output)
+            write_g2o(result.graph, args.output, keep_edges=result.inliers if args.drop_outliers else None)
             written.append(args.output)
         if args.report is not None:
             with atomic_text_file(args.report) as out:

@@ -51,7 +51,7 @@ def triangle_graph(dim: int, consistent: bool) -> PoseGraph:
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_consistent_triangle_reaches_zero_cost(dim, backend):
-    result = solve(triangle_graph(dim, consistent=True), linear_solver=backend)
+    result = solve(triangle_graph(dim, consistent=True), "l2", linear_solver=backend)
     assert result.converged
     assert result.cost < 1e-20
     # Pose 0 is the gauge: it stays where it was.
@@ -62,7 +62,7 @@ def test_consistent_triangle_reaches_zero_cost(dim, backend):
 def test_single_edge_solution_equals_measurement(dim):
     graph = triangle_graph(dim, consistent=False).subgraph_edges(np.array([True, False, False]))
     graph = PoseGraph(dim, graph.vertex_ids[:2], graph.poses[:2], graph.edges, graph.measurements, graph.information)
-    result = solve(graph)
+    result = solve(graph, "l2")
     T = to_matrices(dim, result.graph.poses)
     Z = to_matrices(dim, graph.measurements[0])
     np.testing.assert_allclose(np.linalg.inv(T[0]) @ T[1], Z, atol=1e-12)
@@ -96,14 +96,14 @@ def test_sparse_solver_matches_dense_solve(dataset_path, backend):
     graph = read_g2o(dataset_path("tinyGrid3D.g2o"))
     expected = dense_gauss_newton(graph, iterations=100)
     tight = SolverOptions(rel_cost_tol=0.0, gradient_tol=1e-13, max_iterations=500)
-    result = solve(graph, linear_solver=backend, options=tight)
+    result = solve(graph, "l2", linear_solver=backend, options=tight)
     np.testing.assert_allclose(to_matrices(3, result.graph.poses), expected, atol=1e-9)
 
 
 @pytest.mark.parametrize("name", sorted(GTSAM_OPTIMA))
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_least_squares_optimum_equals_gtsam(dataset_path, name, backend):
-    result = solve(read_g2o(dataset_path(name)), linear_solver=backend)
+    result = solve(read_g2o(dataset_path(name)), "l2", linear_solver=backend)
     assert result.converged, result.message
     assert result.cost == pytest.approx(GTSAM_OPTIMA[name], rel=1e-6)
 
@@ -111,20 +111,20 @@ def test_least_squares_optimum_equals_gtsam(dataset_path, name, backend):
 @pytest.mark.parametrize("method", ["gn", "lm"])
 def test_gauss_newton_and_levenberg_marquardt_agree(dataset_path, method):
     graph = read_g2o(dataset_path("intel.g2o"))
-    result = solve(graph, options=SolverOptions(method=method))
+    result = solve(graph, "l2", options=SolverOptions(method=method))
     assert result.cost == pytest.approx(GTSAM_OPTIMA["intel.g2o"], rel=1e-8)
 
 
 def test_edges_only_file_solves_from_spanning_tree_guess(dataset_path):
     graph = read_g2o(dataset_path("kitti_00.g2o"))
-    result = solve(graph)
+    result = solve(graph, "l2")
     assert result.converged, result.message
     assert result.cost < 1e-3 * result.initial_cost
 
 
 def test_iteration_limit_is_reported_not_raised(dataset_path):
     graph = read_g2o(dataset_path("manhattanOlson3500.g2o"))
-    result = solve(graph, options=SolverOptions(max_iterations=1))
+    result = solve(graph, "l2", options=SolverOptions(max_iterations=1))
     assert result.iterations == 1
     assert result.status == 0 and not result.converged
     assert "maximum number of iterations" in result.message
@@ -137,7 +137,7 @@ def test_fixed_poses_do_not_move(dataset_path):
     pinned = PoseGraph(
         graph.dim, graph.vertex_ids, graph.poses, graph.edges, graph.measurements, graph.information, fixed=fixed
     )
-    result = solve(pinned)
+    result = solve(pinned, "l2")
     np.testing.assert_array_equal(result.graph.poses[fixed], from_matrices(3, to_matrices(3, graph.poses[fixed])))
     assert not np.allclose(result.graph.poses[0], graph.poses[0])
 
