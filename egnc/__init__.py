@@ -1,13 +1,14 @@
 """egnc: robust pose-graph optimization with Efficient Graduated Non-Convexity.
 
 Public API: `solve` a pose graph (or a g2o file) into a `Result`; `read_g2o` / `write_g2o`;
-`SolverOptions`; the `PoseGraph` container; the `EgncError` hierarchy.
+`SolverOptions` and `GncOptions`; the `PoseGraph` container; the `EgncError` hierarchy.
 """
 
 from importlib.metadata import PackageNotFoundError, version
 
 from egnc.api import Result, StageReport, solve
 from egnc.errors import EgncError, G2oFormatError, GraphError, SolverError
+from egnc.gnc import GncOptions
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o, write_g2o
 from egnc.least_squares import SolverOptions
@@ -21,6 +22,7 @@ except PackageNotFoundError:  # imported from a source tree that was never insta
 __all__ = [
     "EgncError",
     "G2oFormatError",
+    "GncOptions",
     "GraphError",
     "PoseGraph",
     "Result",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -58,3 +59,7 @@ def test_solve_example_writes_the_input_edges(run_example):
     assert (solved.edges == source.edges).all()
     assert (solved.measurements == source.measurements).all()
     assert not (solved.poses == source.poses).all()
+    # The default robust method rejects exactly the false loop closures of this file.
+    rejected = re.search(r"^rejected (\d+) of \d+ loop closures, (\d+) of the (\d+) false ones$", process.stdout, re.M)
+    assert rejected, process.stdout
+    assert rejected[1] == rejected[2] == rejected[3]
