@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 import egnc
+from egnc.api import METHODS
+from egnc.datasets import read_labels
 
 DATASETS = Path(__file__).parents[1] / "datasets"
 GRID2D = DATASETS / "grid2d.g2o"
@@ -18,8 +20,10 @@ GRID2D = DATASETS / "grid2d.g2o"
 # The report fields the README documents; the CLI may add more, never fewer.
 REPORT_KEYS = {
     "method", "linear_solver", "time_s", "initial_cost", "final_cost", "iterations", "status",
-    "message", "converged", "poses", "edges", "loop_closures", "timings_s",
+    "message", "converged", "poses", "edges", "loop_closures", "known_inliers", "rejected_edges",
+    "stages", "timings_s",
 }  # fmt: skip
+STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status"}
 
 
 def egnc_solve(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:
@@ -68,6 +72,13 @@ def test_report_has_the_documented_fields_with_sane_values(tmp_path):
     assert content["linear_solver"] == "scipy"
     assert (content["poses"], content["edges"]) == (graph.num_poses, graph.num_edges)
     assert content["loop_closures"] == int(graph.is_loop_closure.sum()) > 0
+    assert content["known_inliers"] == int(graph.is_odometry.sum())
+    rejected = content["rejected_edges"]
+    assert rejected == sorted(set(rejected)) and graph.is_loop_closure[rejected].all()  # never odometry
+    [stage] = content["stages"]  # least squares is one stage, its kernel has no mu
+    assert stage.keys() == STAGE_KEYS
+    assert (stage["mu_min"], stage["mu_mean"], stage["mu_max"]) == (None, None, None)
+    assert stage["iterations"] == content["iterations"]
     assert 0 < content["final_cost"] < content["initial_cost"]
     assert content["initial_cost"] == pytest.approx(lsq_cost(graph), rel=1e-12)
     assert content["iterations"] >= 1
@@ -99,6 +110,31 @@ def test_least_squares_on_shared_datasets_reaches_gtsam_optimum(
     assert content["converged"] is True
 
 
+def test_default_method_drops_exactly_the_false_loops(tmp_path):
+    graph_path = DATASETS / "grid2d_outliers.g2o"
+    out, report = tmp_path / "inliers.g2o", tmp_path / "report.json"
+    run = egnc_solve(graph_path, "--drop-outliers", "-o", out, "--report", report)
+    assert run.returncode == 0, run.stderr
+    content = json.loads(report.read_text())
+    assert content["method"] == "egnc"
+    assert len(content["stages"]) > 1
+
+    is_false, _ = read_labels(DATASETS / "grid2d_outliers.labels.json")
+    assert content["rejected_edges"] == np.flatnonzero(is_false).tolist()
+    source, kept = egnc.read_g2o(graph_path), egnc.read_g2o(out)
+    np.testing.assert_array_equal(kept.edges, source.edges[~is_false])
+    np.testing.assert_array_equal(kept.measurements, source.measurements[~is_false])
+    np.testing.assert_array_equal(kept.vertex_ids, source.vertex_ids)
+
+
+def test_known_inliers_none_makes_every_edge_a_candidate(tmp_path):
+    report = tmp_path / "report.json"
+    run = egnc_solve(GRID2D, "--method", "huber", "--known-inliers", "none", "--report", report, "-q")
+    assert run.returncode == 0, run.stderr
+    content = json.loads(report.read_text())
+    assert (content["method"], content["known_inliers"]) == ("huber", 0)
+
+
 def test_quiet_prints_nothing(tmp_path):
     run = egnc_solve(GRID2D, "--method", "l2", "-q", "-o", tmp_path / "out.g2o")
     assert (run.returncode, run.stdout, run.stderr) == (0, "", "")
@@ -114,9 +150,10 @@ def test_version_is_the_package_version():
 def test_help_lists_every_option_and_the_examples():
     run = egnc_solve("--help")
     assert run.returncode == 0
-    for option in ("--output", "--method", "--linear-solver", "--solver", "--max-iters", "--skip-unknown",
-                   "--report", "--quiet", "--version"):  # fmt: skip
+    for option in ("--output", "--method", "--known-inliers", "--drop-outliers", "--linear-solver", "--solver",
+                   "--max-iters", "--skip-unknown", "--report", "--quiet", "--version"):  # fmt: skip
         assert option in run.stdout
+    assert "{" + ",".join(METHODS) + "}" in run.stdout
     assert "examples:" in run.stdout
     assert "egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o" in run.stdout
 
