@@ -63,7 +63,11 @@ def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc
 
 
 class CholmodSolver:
-    """CHOLMOD supernodal Cholesky with the symbolic analysis done once."""
+    """CHOLMOD Cholesky with the symbolic analysis done once.
+
+    Attributes:
+        factor: the scikit-sparse `Factor` holding the analysis (and the last factorization).
+    """
 
     name = "cholmod"
 
@@ -74,14 +78,14 @@ class CholmodSolver:
         self._indices = indices.astype(np.int32)
         self._indptr = indptr.astype(np.int32)
         pattern = _matrix(np.ones(len(indices)), self._indices, self._indptr)
-        self._factor = cholmod.analyze(pattern)
+        self.factor = cholmod.analyze(pattern)
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         try:
-            self._factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
+            self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
         except self._cholmod.CholmodNotPositiveDefiniteError as error:
             raise NotPositiveDefiniteError(f"normal equations are not positive definite ({error})") from None
-        return self._factor(rhs)
+        return self.factor(rhs)
 
 
 class ScipySolver:
