@@ -1,5 +1,6 @@
-"""Pose-graph file formats."""
+"""Pose-graph file formats: g2o, and riSAM's Incremental Robot Log (IRL)."""
 
 from egnc.io.g2o import read_g2o, write_g2o
+from egnc.io.irl import IrlLog, IrlPrior, read_irl, write_irl
 
-__all__ = ["read_g2o", "write_g2o"]
+__all__ = ["IrlLog", "IrlPrior", "read_g2o", "read_irl", "write_g2o", "write_irl"]
