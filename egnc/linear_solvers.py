@@ -2,7 +2,11 @@
 
 - `cholmod`: CHOLMOD through scikit-sparse (optional extra). The fill-reducing ordering and the
   symbolic factorization are computed once per pattern; each solve only refactorizes numerically.
-  CHOLMOD reads the lower triangle only, so the pattern stores just that.
+  CHOLMOD reads the lower triangle only, so the pattern stores just that. CHOLMOD 5.x scatters
+  each supernode's entries in an OpenMP loop with a compiled-in team of 4 threads; that loop is
+  far too small to amortize a fork/join per supernode, so the calls run with OpenMP serialized
+  (sphere2500: 53 -> 26 ms per factorization on 2 cores, see BENCHMARKS.md). BLAS threads
+  (OpenBLAS's `OPENBLAS_NUM_THREADS`) are left to the user.
 - `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (minimum-degree ordering
   on `A + A^T`, diagonal pivoting), which is how SuperLU is best used on SPD matrices. SciPy has
   no sparse Cholesky; this is the always-available fallback.
@@ -10,7 +14,11 @@
 
 from __future__ import annotations
 
+import ctypes
 import importlib.util
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Literal, Protocol
 
 import numpy as np
@@ -62,6 +70,33 @@ def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc
     return sp.csc_matrix((data, indices, indptr), shape=(n, n), copy=False)
 
 
+def _loaded_openmp() -> ctypes.CDLL | None:
+    """GNU OpenMP's runtime if something (CHOLMOD) already loaded it into this process, else None."""
+    try:
+        return ctypes.CDLL("libgomp.so.1", mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+    except (OSError, AttributeError):  # not loaded, another OpenMP runtime, or no RTLD_NOLOAD
+        return None
+
+
+@contextmanager
+def serial_openmp() -> Iterator[None]:
+    """Run OpenMP parallel regions started by this thread with one thread, then restore the setting.
+
+    `max-active-levels = 0` makes every parallel region inactive, which also overrides a
+    `num_threads(4)` clause (unlike `OMP_NUM_THREADS`). It is a no-op without libgomp.
+    """
+    openmp = _loaded_openmp()
+    if openmp is None:
+        yield
+        return
+    previous = openmp.omp_get_max_active_levels()
+    openmp.omp_set_max_active_levels(0)
+    try:
+        yield
+    finally:
+        openmp.omp_set_max_active_levels(previous)
+
+
 class CholmodSolver:
     """CHOLMOD Cholesky with the symbolic analysis done once.
 
@@ -81,11 +116,12 @@ class CholmodSolver:
         self.factor = cholmod.analyze(pattern)
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        try:
-            self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
-        except self._cholmod.CholmodNotPositiveDefiniteError as error:
-            raise NotPositiveDefiniteError(f"normal equations are not positive definite ({error})") from None
-        return self.factor(rhs)
+        with serial_openmp():
+            try:
+                self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
+            except self._cholmod.CholmodNotPositiveDefiniteError as error:
+                raise NotPositiveDefiniteError(f"normal equations are not positive definite ({error})") from None
+            return self.factor(rhs)
 
 
 class ScipySolver:
