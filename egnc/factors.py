@@ -50,11 +50,33 @@ class Linearization:
         residuals: `(E, d)` tangent-space residuals `e`.
         J_e_xi: `(E, d, d)` Jacobian of `e` w.r.t. the right perturbation of `X_i`.
         J_e_xj: `(E, d, d)` Jacobian of `e` w.r.t. the right perturbation of `X_j`.
+        stacked: `(E, d, 2d + 1)` `[J_e_xi | J_e_xj | e]`, the layout the normal equations are
+            assembled from; built from the other three when not given (`linearize` fills it
+            directly and the other three are views of it).
     """
 
     residuals: np.ndarray
     J_e_xi: np.ndarray
     J_e_xj: np.ndarray
+    stacked: np.ndarray = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        if self.stacked is None:
+            stacked = np.concatenate([self.J_e_xi, self.J_e_xj, self.residuals[:, :, None]], axis=2)
+            object.__setattr__(self, "stacked", stacked)
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeErrors:
+    """Residuals of every edge at one set of poses, with what `linearize` reuses from them.
+
+    Attributes:
+        residuals: `(E, d)` tangent-space residuals `e`.
+        T_j_i: `(E, n, n)` relative poses `X_j^-1 X_i`.
+    """
+
+    residuals: np.ndarray
+    T_j_i: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,27 +102,36 @@ class BetweenFactors:
         Z = to_matrices(graph.dim, graph.measurements)
         return cls(graph.dim, graph.edges, group.inverse(Z), graph.information)
 
-    def _errors(self, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return `(E, n, n)` error poses `Z^-1 X_i^-1 X_j` and `(E, n, n)` `X_j^-1 X_i`."""
+    def evaluate(self, T: np.ndarray) -> EdgeErrors:
+        """Residuals `e = Log(Z^-1 X_i^-1 X_j)` at poses `T` `(N, n, n)`, keeping `X_j^-1 X_i` for `linearize`."""
         group = group_of(self.dim)
-        T_i, T_j = T[self.edges[:, 0]], T[self.edges[:, 1]]
-        T_j_i = group.between(T_j, T_i)
-        return self.Z_inv @ group.inverse(T_j_i), T_j_i
+        T_j_i = group.between(T[self.edges[:, 1]], T[self.edges[:, 0]])
+        return EdgeErrors(group.log(self.Z_inv @ group.inverse(T_j_i)), T_j_i)
 
     def residuals(self, T: np.ndarray) -> np.ndarray:
         """Residuals `(E, d)` at poses `T` `(N, n, n)`."""
-        return group_of(self.dim).log(self._errors(T)[0])
+        return self.evaluate(T).residuals
 
     def whitened_norms(self, residuals: np.ndarray) -> np.ndarray:
         """Mahalanobis norms `r = sqrt(e^T Omega e)` `(E,)` of residuals `(E, d)`."""
         squared = np.einsum("ei,eij,ej->e", residuals, self.information, residuals)
         return np.sqrt(np.maximum(squared, 0.0))
 
-    def linearize(self, T: np.ndarray) -> Linearization:
-        """Residuals and both Jacobians at poses `T` `(N, n, n)`."""
+    def linearize(self, T: np.ndarray, errors: EdgeErrors | None = None) -> Linearization:
+        """Residuals and both Jacobians at poses `T` `(N, n, n)`.
+
+        Args:
+            T: `(N, n, n)` poses.
+            errors: `evaluate(T)` if already computed (at these very poses), to reuse.
+        """
         group = group_of(self.dim)
-        error_pose, T_j_i = self._errors(T)
-        e = group.log(error_pose)
-        J_e_xj = group.right_jacobian_inverse(e)
-        J_e_xi = -J_e_xj @ group.adjoint(T_j_i)
-        return Linearization(e, J_e_xi, J_e_xj)
+        errors = self.evaluate(T) if errors is None else errors
+        e = errors.residuals
+        d = e.shape[1]
+        stacked = np.empty((len(e), d, 2 * d + 1))
+        J_e_xj = stacked[:, :, d : 2 * d]
+        J_e_xj[...] = group.right_jacobian_inverse(e)
+        np.matmul(J_e_xj, group.adjoint(errors.T_j_i), out=stacked[:, :, :d])
+        np.negative(stacked[:, :, :d], out=stacked[:, :, :d])
+        stacked[:, :, 2 * d] = e
+        return Linearization(stacked[:, :, 2 * d], stacked[:, :, :d], J_e_xj, stacked)

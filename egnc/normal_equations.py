@@ -1,13 +1,20 @@
 """Gauss-Newton normal equations `H = sum w J^T Omega J`, `g = sum w J^T Omega e` with a fixed pattern.
 
 The sparsity pattern of `H` depends only on which poses the edges join, so it is built once, with
-an index map from every scalar of every per-edge Jacobian block product to its slot in the CSC
-data array. Each iteration then computes the block products for all edges in a few batched matmuls
-and scatters them with one `np.bincount`: no per-edge Python and no sparse matrix rebuilt from COO.
+an index map from every scalar of every per-edge product to its slot in the output. With
+`S = [J_i | J_j | e]` `(d, 2d + 1)` per edge (`Linearization.stacked`), one batched product
 
-Unknowns are the `d`-dimensional tangent steps of the free (not fixed) poses, in pose-row order.
-Contributions that land on a fixed pose, or in the upper triangle when only the lower triangle is
-stored (CHOLMOD reads only the lower one), are sent to one trailing "discard" slot that is dropped.
+    P = [J_i | J_j]^T (w Omega) S                                        `(2d, 2d + 1)`
+
+holds all four Jacobian blocks of the edge (`J_a^T W J_b`) and, in its last column, both
+gradient pieces `J_a^T W e`. Each iteration computes `P` for all edges with two `np.matmul`
+calls and scatters it with one `np.bincount` into `[H data | g | discard]`: no per-edge Python
+and no sparse matrix rebuilt from COO.
+
+Unknowns are the `d`-dimensional tangent steps of the free (not fixed) poses, in pose-row order
+or in a given block order (e.g. a fill-reducing one). Contributions that land on a fixed pose,
+or in the upper triangle when only the lower triangle is stored (CHOLMOD reads only the lower
+one), go to the trailing "discard" slot, which is dropped.
 """
 
 from __future__ import annotations
@@ -21,17 +28,15 @@ from egnc.factors import Linearization
 
 @dataclass(frozen=True, eq=False)
 class NormalEquationsPattern:
-    """Fixed CSC pattern of `H` (size `n x n`, `n = d * num_free`) and the scatter maps into it.
+    """Fixed CSC pattern of `H` (size `n x n`, `n = d * num_free`) and the scatter map into it.
 
     Attributes:
         size: number of unknowns `n`.
         indptr: `(n + 1,)` CSC column pointers.
-        indices: `(nnz,)` CSC row indices.
+        indices: `(nnz,)` CSC row indices, sorted within each column.
         lower_only: whether only the lower triangle (with the diagonal) is stored.
-        block_slots: `(E, k, d, d)` data slot of each scalar of the `k` per-edge blocks
-            (`J_i^T W J_i`, `J_j^T W J_j`, `J_j^T W J_i` and, when full, that block again for its
-            mirror position); `nnz` means discard.
-        gradient_slots: `(E, 2, d)` index into `g` of `J_i^T W e` and `J_j^T W e`; `n` means discard.
+        slots: `(E, 2d, 2d + 1)` where each scalar of the per-edge product `P` goes: `[0, nnz)`
+            into the CSC data of `H`, `nnz + k` into `g[k]`, `nnz + n` is discarded.
         diagonal_slots: `(n,)` data slot of each diagonal entry of `H`.
         free_index: `(N,)` unknown-block index of each pose, -1 for a fixed pose.
     """
@@ -40,8 +45,7 @@ class NormalEquationsPattern:
     indptr: np.ndarray
     indices: np.ndarray
     lower_only: bool
-    block_slots: np.ndarray
-    gradient_slots: np.ndarray
+    slots: np.ndarray
     diagonal_slots: np.ndarray
     free_index: np.ndarray
 
@@ -51,66 +55,71 @@ class NormalEquationsPattern:
         return len(self.indices)
 
     @classmethod
-    def build(cls, edges: np.ndarray, fixed: np.ndarray, d: int, lower_only: bool) -> NormalEquationsPattern:
-        """Build the pattern for `edges` `(E, 2)` between poses of which `fixed` `(N,)` are held constant."""
-        num_free = int(np.count_nonzero(~fixed))
+    def build(
+        cls,
+        edges: np.ndarray,
+        fixed: np.ndarray,
+        d: int,
+        lower_only: bool,
+        block_order: np.ndarray | None = None,
+    ) -> NormalEquationsPattern:
+        """Build the pattern for `edges` `(E, 2)` between poses of which `fixed` `(N,)` are held constant.
+
+        Args:
+            edges: `(E, 2)` pose rows `(i, j)`.
+            fixed: `(N,)` bool, poses without unknowns.
+            d: tangent dimension.
+            lower_only: store only the lower triangle of `H`.
+            block_order: `(num_free,)` permutation; unknown block `k` belongs to the
+                `block_order[k]`-th free pose (in pose-row order). Default: pose-row order.
+        """
+        free_rows = np.flatnonzero(~fixed)
+        num_free = len(free_rows)
         free_index = np.full(len(fixed), -1, dtype=np.int64)
-        free_index[~fixed] = np.arange(num_free)
-        var = free_index[edges]  # (E, 2)
-        both_free = (var[:, 0] >= 0) & (var[:, 1] >= 0)
-        hi = np.maximum(var[:, 0], var[:, 1])
-        lo = np.minimum(var[:, 0], var[:, 1])
-        stride = max(num_free, 1)
-        pair_keys, pair_of_edge = np.unique(hi[both_free] * stride + lo[both_free], return_inverse=True)
-        pair_hi, pair_lo = pair_keys // stride, pair_keys % stride
-        num_pairs = len(pair_keys)
-
-        # Blocks: diagonal (k, k); lower (hi, lo) per pair; upper (lo, hi) per pair when full.
-        block_rows = [np.arange(num_free), pair_hi]
-        block_cols = [np.arange(num_free), pair_lo]
-        if not lower_only:
-            block_rows.append(pair_lo)
-            block_cols.append(pair_hi)
-        block_row = np.concatenate(block_rows)
-        block_col = np.concatenate(block_cols)
-        a, b = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
-        rows = block_row[:, None, None] * d + a  # (B, d, d)
-        cols = block_col[:, None, None] * d + b
-        keep = np.ones(rows.shape, dtype=bool)
-        if lower_only:
-            keep[:num_free] = a >= b  # upper scalars of diagonal blocks are not stored
-        order = np.lexsort((rows[keep], cols[keep]))  # CSC: by column, then row
-        nnz = len(order)
-        slot_of_kept = np.empty(nnz, dtype=np.int64)
-        slot_of_kept[order] = np.arange(nnz)
-        slots = np.full(rows.shape, nnz, dtype=np.int64)
-        slots[keep] = slot_of_kept
+        order = np.arange(num_free) if block_order is None else np.asarray(block_order, dtype=np.int64)
+        if sorted(order.tolist()) != list(range(num_free)):
+            raise ValueError(f"block_order must be a permutation of range({num_free})")
+        free_index[free_rows[order]] = np.arange(num_free)
         size = num_free * d
-        indices = rows[keep][order]
+        n1 = max(size, 1)  # key stride: key = column * n1 + row
+
+        # Stored scalars of H: every diagonal block, and both off-diagonal blocks of every pair of
+        # free poses an edge joins; in lower mode only those with row >= column.
+        var = free_index[np.asarray(edges, dtype=np.int64).reshape(-1, 2)]  # (E, 2)
+        both_free = (var >= 0).all(axis=1)
+        pairs = np.concatenate([np.repeat(np.arange(num_free), 2).reshape(-1, 2), var[both_free], var[both_free, ::-1]])
+        stride = max(num_free, 1)
+        block_row, block_col = np.divmod(np.unique(pairs[:, 0] * stride + pairs[:, 1]), stride)
+        a, b = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
+        rows = (block_row[:, None, None] * d + a).ravel()
+        cols = (block_col[:, None, None] * d + b).ravel()
+        if lower_only:
+            keep = rows >= cols
+            rows, cols = rows[keep], cols[keep]
+        keys = np.sort(cols * n1 + rows)  # CSC order: by column, then row
+        indices = keys % n1
         indptr = np.zeros(size + 1, dtype=np.int64)
-        np.cumsum(np.bincount(cols[keep], minlength=size), out=indptr[1:])
+        np.cumsum(np.bincount(keys // n1, minlength=size), out=indptr[1:])
+        nnz = len(keys)
 
-        discard = np.full((d, d), nnz, dtype=np.int64)
-        diag_i = np.where(var[:, 0:1, None] >= 0, slots[np.maximum(var[:, 0], 0)], discard)
-        diag_j = np.where(var[:, 1:2, None] >= 0, slots[np.maximum(var[:, 1], 0)], discard)
-        # The cross block J_j^T W J_i sits at (row j, col i): in the lower block when j is `hi`,
-        # otherwise it is the transpose of what the lower block needs.
-        lower = np.broadcast_to(discard, (len(edges), d, d)).copy()
-        upper = lower.copy()
-        lower_slots = slots[num_free + pair_of_edge]
-        j_is_hi = (var[both_free, 1] > var[both_free, 0])[:, None, None]
-        lower[both_free] = np.where(j_is_hi, lower_slots, lower_slots.transpose(0, 2, 1))
-        blocks = [diag_i, diag_j, lower]
-        if not lower_only:
-            upper_slots = slots[num_free + num_pairs + pair_of_edge]
-            upper[both_free] = np.where(j_is_hi, upper_slots.transpose(0, 2, 1), upper_slots)
-            blocks.append(upper)
-        block_slots = np.stack(blocks, axis=1)
+        # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes.
+        r = np.arange(2 * d)
+        row_var = var[:, r // d]  # (E, 2d): unknown block of P's row r
+        grow = row_var * d + r % d
+        slots = np.full((len(var), 2 * d, 2 * d + 1), nnz + size, dtype=np.int64)
+        gcol = grow[:, None, :]  # column c < 2d of P is unknown grow[c]
+        stored = (row_var[:, :, None] >= 0) & (row_var[:, None, :] >= 0)
+        if lower_only:
+            stored &= grow[:, :, None] >= gcol
+        query = (gcol * n1 + grow[:, :, None])[stored]
+        found = np.searchsorted(keys, query)
+        assert np.array_equal(keys[found], query), "pattern misses an entry"
+        slots[:, :, : 2 * d][stored] = found
+        slots[:, :, 2 * d] = np.where(row_var >= 0, nnz + grow, nnz + size)
 
-        grad = var[:, :, None] * d + np.arange(d)
-        gradient_slots = np.where(var[:, :, None] >= 0, grad, size)
-        diagonal_slots = slots[np.arange(num_free)][:, np.arange(d), np.arange(d)].reshape(-1)
-        return cls(size, indptr, indices, lower_only, block_slots, gradient_slots, diagonal_slots, free_index)
+        diagonal = np.arange(size)
+        diagonal_slots = np.searchsorted(keys, diagonal * n1 + diagonal)
+        return cls(size, indptr, indices, lower_only, slots, diagonal_slots, free_index)
 
     def assemble(
         self, linearization: Linearization, information: np.ndarray, weights: np.ndarray
@@ -122,18 +131,9 @@ class NormalEquationsPattern:
             information: `(E, d, d)` information matrices `Omega`.
             weights: `(E,)` IRLS weights `w` (1 for plain least squares).
         """
-        W = weights[:, None, None] * information
-        W_J_i = W @ linearization.J_e_xi
-        W_J_j = W @ linearization.J_e_xj
-        J_i_T = linearization.J_e_xi.transpose(0, 2, 1)
-        J_j_T = linearization.J_e_xj.transpose(0, 2, 1)
-        cross = J_j_T @ W_J_i
-        blocks = [J_i_T @ W_J_i, J_j_T @ W_J_j, cross]
-        if not self.lower_only:
-            blocks.append(cross)
-        values = np.stack(blocks, axis=1)
-        data = np.bincount(self.block_slots.ravel(), weights=values.ravel(), minlength=self.nnz + 1)
-        W_e = np.einsum("eij,ej->ei", W, linearization.residuals)
-        grad_values = np.stack([J_i_T @ W_e[:, :, None], J_j_T @ W_e[:, :, None]], axis=1)
-        gradient = np.bincount(self.gradient_slots.ravel(), weights=grad_values.ravel(), minlength=self.size + 1)
-        return data[: self.nnz], gradient[: self.size]
+        S = linearization.stacked
+        d = S.shape[1]
+        W_S = (weights[:, None, None] * information) @ S
+        P = S[:, :, : 2 * d].transpose(0, 2, 1) @ W_S
+        out = np.bincount(self.slots.ravel(), weights=P.ravel(), minlength=self.nnz + self.size + 1)
+        return out[: self.nnz], out[self.nnz : self.nnz + self.size]
