@@ -37,7 +37,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from egnc.errors import SolverError
-from egnc.factors import BetweenFactors, group_of
+from egnc.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.graph import PoseGraph
 from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, make_linear_solver, resolve_name
 from egnc.normal_equations import NormalEquationsPattern
@@ -118,8 +118,9 @@ class SolverResult:
         status: termination code, see `STATUS_MESSAGES`.
         message: human-readable termination reason.
         time_s: wall time of the solve in seconds.
-        timings: seconds spent in `"linearize"` (residuals and Jacobians), `"assemble"`,
-            `"factorize"` (factorization and solve) and `"update"` (retraction and cost).
+        timings: seconds spent in `"linearize"` (Jacobians, and the initial residuals),
+            `"assemble"`, `"factorize"` (factorization and solve) and `"update"` (retraction,
+            residuals and cost at the trial poses; an accepted step's residuals are reused).
     """
 
     poses: np.ndarray
@@ -167,9 +168,10 @@ class Problem:
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
         group = group_of(self.graph.dim)
-        free = self.pattern.free_index >= 0
+        free_index = self.pattern.free_index
+        free = free_index >= 0
         moved = T.copy()
-        moved[free] = group.rplus(T[free], step.reshape(-1, self.graph.tangent_dim))
+        moved[free] = group.rplus(T[free], step.reshape(-1, self.graph.tangent_dim)[free_index[free]])
         return moved
 
 
@@ -215,24 +217,28 @@ def solve_least_squares(
     factors, pattern = problem.factors, problem.pattern
     T = np.array(initial_poses, dtype=np.float64)
 
-    def linearize(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        with clock("linearize"):
-            linearization = factors.linearize(poses)
-            r = factors.whitened_norms(linearization.residuals)
-        with clock("assemble"):
-            data, gradient = pattern.assemble(linearization, factors.information, loss.weight(r))
-        return data, gradient, r, float(np.sum(loss.cost(r)))
+    def evaluate(poses: np.ndarray) -> tuple[EdgeErrors, np.ndarray, float]:
+        errors = factors.evaluate(poses)
+        r = factors.whitened_norms(errors.residuals)
+        return errors, r, float(np.sum(loss.cost(r)))
 
-    data, gradient, r, cost = linearize(T)
+    with clock("linearize"):
+        errors, r, cost = evaluate(T)
     history = [cost]
     damping, growth = options.initial_damping, 2.0
     iterations = linear_solves = 0
     status = 0
+    data = gradient = None  # normal equations at T, built when a step from T is needed
     while iterations < options.max_iterations:
+        if data is None:
+            with clock("linearize"):
+                linearization = factors.linearize(T, errors)  # reuses the residuals at T
+            with clock("assemble"):
+                data, gradient = pattern.assemble(linearization, factors.information, loss.weight(r))
+            diagonal = np.clip(data[pattern.diagonal_slots], 1e-6, 1e32)
         if np.max(np.abs(gradient), initial=0.0) <= options.gradient_tol:
             status = 2
             break
-        diagonal = np.clip(data[pattern.diagonal_slots], 1e-6, 1e32)
         use_damping = options.method == "lm"
         with clock("factorize"):
             damped = data.copy()
@@ -259,7 +265,7 @@ def solve_least_squares(
             break
         with clock("update"):
             T_new = problem.retract(T, step)
-            cost_new = float(np.sum(loss.cost(factors.whitened_norms(factors.residuals(T_new)))))
+            errors_new, r_new, cost_new = evaluate(T_new)
         predicted = 0.5 * float(step @ ((damping * diagonal * step if use_damping else 0.0) - gradient))
         gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
         if use_damping and gain <= 1e-3:
@@ -275,8 +281,8 @@ def solve_least_squares(
             damping *= max(DAMPING_MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
             growth = 2.0
         previous = cost
-        T = T_new
-        data, gradient, r, cost = linearize(T)
+        T, errors, r, cost = T_new, errors_new, r_new, cost_new
+        data = gradient = None
         history.append(cost)
         iterations += 1
         if previous - cost <= options.rel_cost_tol * previous:
