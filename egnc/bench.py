@@ -13,7 +13,7 @@ solved as is, with its ODOMETRY entries as known inliers; the reference is the l
 optimum of the graph without the labelled outliers.
 
 Methods: every name in `egnc.schedules.METHODS`, optionally with `GncOptions` overrides in
-brackets (`egnc[window=50]`, `egnc[threshold=distance,c=2]`), plus the GTSAM baselines
+brackets (`egnc[threshold=distance]`, `risam[c=2,refine=false]`), plus the GTSAM baselines
 `gtsam-gnc-gm`, `gtsam-gnc-tls` (`GncLMOptimizer`) and `gtsam-lm` (least squares) when `gtsam` is
 importable. GTSAM runs follow `benchmarks/gtsam_baseline.py`: the graph goes through a temporary
 g2o file and `gtsam.readG2o`, a prior with sigma 1e-3 holds the lowest id at its initial value,
@@ -102,7 +102,7 @@ class MethodSpec:
     """One method of the grid.
 
     Attributes:
-        label: the spec as given, e.g. `"egnc[window=50]"`; names the method in the results.
+        label: the spec as given, e.g. `"egnc[threshold=distance]"`; names the method in the results.
         method: an `egnc.schedules.METHODS` name or one of `GTSAM_METHODS`.
         overrides: `GncOptions` fields to change, as `(name, value)` pairs (egnc methods only).
     """
@@ -486,7 +486,7 @@ def run_grid(
         datasets: g2o paths or names resolved in `data_dir` (`csail` -> `data_dir/csail.g2o`).
         percents: outlier percentages among loop closures, each in [0, 100).
         seeds: corruption seeds.
-        methods: specs (`"egnc"`, `"egnc[window=50]"`, `"gtsam-gnc-tls"`, ...) or `MethodSpec`s;
+        methods: specs (`"egnc"`, `"egnc[threshold=distance]"`, `"gtsam-gnc-tls"`, ...) or `MethodSpec`s;
             GTSAM methods are skipped (with a progress note) when gtsam is not importable.
         data_dir: where dataset names are looked up.
         variant: false-loop variant of `add_false_loops` ("random", "group", "mixed", "close").

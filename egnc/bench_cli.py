@@ -23,11 +23,11 @@ from egnc.errors import EgncError
 EXAMPLES = """examples:
   egnc-bench --datasets csail,intel --percent 10 --seeds 1 --methods egnc,risam,gnc-tls,l2
   egnc-bench --datasets csail,intel,manhattanOlson3500,sphere2500 --percent 10,30,50 --seeds 1,2,3
-  egnc-bench --datasets datasets/grid2d.g2o --methods "egnc,egnc[threshold=distance],risam[window=50]"
+  egnc-bench --datasets datasets/grid2d.g2o --methods "egnc,egnc[threshold=distance],risam[c=2]"
   egnc-bench --irl ../shared/datasets/manhattan_noisy.irl --methods egnc,risam,gtsam-gnc-tls
 
 Method specs: any egnc method (egnc, risam, gnc-gm, gnc-tls, huber, cauchy, gm, l2), optionally
-with GncOptions overrides in brackets (egnc[window=50], egnc[threshold=distance,c=2]), and the
+with GncOptions overrides in brackets (egnc[threshold=distance], risam[c=2,refine=false]), and the
 GTSAM baselines gtsam-gnc-gm, gtsam-gnc-tls, gtsam-lm when gtsam is installed (egnc[bench]).
 """
 

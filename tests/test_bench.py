@@ -39,14 +39,24 @@ DATASETS = Path(__file__).parents[1] / "datasets"
 
 def test_method_specs_with_options():
     assert parse_method("egnc") == MethodSpec("egnc", "egnc", ())
-    spec = parse_method("egnc[window=50, threshold=distance,refine=false]")
-    assert spec.method == "egnc" and spec.label == "egnc[window=50, threshold=distance,refine=false]"
+    spec = parse_method("egnc[max_stages=50, threshold=distance,refine=false]")
+    assert spec.method == "egnc" and spec.label == "egnc[max_stages=50, threshold=distance,refine=false]"
     options = spec.gnc_options()
-    assert (options.window, options.threshold, options.refine) == (50, "distance", False)
-    assert parse_method("risam[window=none,c=2.5]").gnc_options().c == 2.5
+    assert (options.max_stages, options.threshold, options.refine) == (50, "distance", False)
+    assert parse_method("risam[c=2.5]").gnc_options().c == 2.5
     assert parse_method("gtsam-gnc-tls").is_gtsam
-    specs = parse_methods("egnc[window=50,c=2],risam, l2,gtsam-lm")
-    assert [s.label for s in specs] == ["egnc[window=50,c=2]", "risam", "l2", "gtsam-lm"]
+    specs = parse_methods("egnc[max_stages=50,c=2],risam, l2,gtsam-lm")
+    assert [s.label for s in specs] == ["egnc[max_stages=50,c=2]", "risam", "l2", "gtsam-lm"]
+
+
+def test_option_values_follow_the_field_types():
+    assert bench._convert("none", int | None, "x") is None
+    assert bench._convert("7", int | None, "x") == 7
+    assert bench._convert("yes", bool, "x") is True
+    with pytest.raises(EgncError, match="x: 'maybe' is not a valid bool"):
+        bench._convert("maybe", bool, "x")
+    with pytest.raises(EgncError, match="is not a valid int or none"):
+        bench._convert("1.5", int | None, "x")
 
 
 @pytest.mark.parametrize(
@@ -54,7 +64,7 @@ def test_method_specs_with_options():
     [
         ("foo", "unknown method 'foo'"),
         ("egnc[bar=1]", "unknown option 'bar'"),
-        ("egnc[window=x]", "not a valid int or none"),
+        ("egnc[max_stages=x]", "not a valid int"),
         ("egnc[c=-1]", "must be positive"),
         ("egnc[threshold=abs]", "threshold"),
         ("egnc[c]", "not of the form name=value"),
