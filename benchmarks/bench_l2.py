@@ -46,7 +46,7 @@ from egnc import cli, solve  # noqa: E402
 from egnc.factors import to_matrices  # noqa: E402
 from egnc.io import read_g2o  # noqa: E402
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares  # noqa: E402
-from egnc.linear_solvers import serial_openmp  # noqa: E402
+from egnc.linear_solvers import serial_native_threads  # noqa: E402
 
 DEFAULT_FILES = ("manhattanOlson3500", "city10000", "sphere2500")
 GTSAM_TOL = 1e-10
@@ -154,7 +154,7 @@ def compare_file(name: str, repeat: int = 3) -> FileResult:
 
 
 def bare_factorization_ms(graph, poses: np.ndarray, repeat: int) -> float:
-    """Median ms of one CHOLMOD `cholesky_inplace` of `H + 1e-8 diag(H)` at `poses`, with the solver's analysis and OpenMP setting."""
+    """Median ms of one CHOLMOD `cholesky_inplace` of `H + 1e-8 diag(H)` at `poses`, with the solver's analysis and threads."""
     problem = Problem.from_graph(graph, "cholmod")
     pattern = problem.pattern
     linearization = problem.factors.linearize(poses)
@@ -165,7 +165,7 @@ def bare_factorization_ms(graph, poses: np.ndarray, repeat: int) -> float:
         (data, pattern.indices.astype(np.int32), pattern.indptr.astype(np.int32)), shape=(pattern.size, pattern.size)
     )
     times = []
-    with serial_openmp():  # as the solver calls it
+    with serial_native_threads():  # as the solver calls it
         for _ in range(max(3, repeat)):
             start = time.perf_counter()
             solver.factor.cholesky_inplace(matrix)

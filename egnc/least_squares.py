@@ -175,6 +175,12 @@ class Problem:
         return moved
 
 
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """`a . b` without BLAS: NumPy's OpenBLAS threads a long `dot`, and its worker then spins
+    while CHOLMOD factorizes, which on 2 cores doubled the factorization time."""
+    return float(np.einsum("i,i->", a, b))
+
+
 class _Clock:
     """Accumulates wall time per named phase."""
 
@@ -260,13 +266,13 @@ def solve_least_squares(
                 status = 4
                 break
             continue
-        if np.linalg.norm(step) <= options.step_tol:
+        if np.sqrt(_dot(step, step)) <= options.step_tol:
             status = 3
             break
         with clock("update"):
             T_new = problem.retract(T, step)
             errors_new, r_new, cost_new = evaluate(T_new)
-        predicted = 0.5 * float(step @ ((damping * diagonal * step if use_damping else 0.0) - gradient))
+        predicted = 0.5 * _dot(step, (damping * diagonal * step if use_damping else 0.0) - gradient)
         gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
         if use_damping and gain <= 1e-3:
             damping, growth = damping * growth, growth * 2

@@ -2,11 +2,11 @@
 
 - `cholmod`: CHOLMOD through scikit-sparse (optional extra). The fill-reducing ordering and the
   symbolic factorization are computed once per pattern; each solve only refactorizes numerically.
-  CHOLMOD reads the lower triangle only, so the pattern stores just that. CHOLMOD 5.x scatters
-  each supernode's entries in an OpenMP loop with a compiled-in team of 4 threads; that loop is
-  far too small to amortize a fork/join per supernode, so the calls run with OpenMP serialized
-  (sphere2500: 53 -> 26 ms per factorization on 2 cores, see BENCHMARKS.md). BLAS threads
-  (OpenBLAS's `OPENBLAS_NUM_THREADS`) are left to the user.
+  CHOLMOD reads the lower triangle only, so the pattern stores just that. The calls run on
+  the calling thread only (`serial_native_threads`): CHOLMOD 5.x scatters each supernode in an
+  OpenMP loop with a compiled-in team of 4 threads, far too little work for a fork/join per
+  supernode, and OpenBLAS's worker threads must be woken for every call after the NumPy phases
+  of an iteration. On 2 shared cores each doubled the factorization (see BENCHMARKS.md).
 - `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (minimum-degree ordering
   on `A + A^T`, diagonal pivoting), which is how SuperLU is best used on SPD matrices. SciPy has
   no sparse Cholesky; this is the always-available fallback.
@@ -70,31 +70,40 @@ def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc
     return sp.csc_matrix((data, indices, indptr), shape=(n, n), copy=False)
 
 
-def _loaded_openmp() -> ctypes.CDLL | None:
-    """GNU OpenMP's runtime if something (CHOLMOD) already loaded it into this process, else None."""
+def _loaded_library(name: str) -> ctypes.CDLL | None:
+    """A handle on shared library `name` if something (CHOLMOD) already loaded it, else None."""
     try:
-        return ctypes.CDLL("libgomp.so.1", mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
-    except (OSError, AttributeError):  # not loaded, another OpenMP runtime, or no RTLD_NOLOAD
+        return ctypes.CDLL(name, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+    except (OSError, AttributeError):  # not loaded, or no RTLD_NOLOAD on this platform
         return None
 
 
 @contextmanager
-def serial_openmp() -> Iterator[None]:
-    """Run OpenMP parallel regions started by this thread with one thread, then restore the setting.
+def serial_native_threads() -> Iterator[None]:
+    """Run CHOLMOD's OpenMP regions and its OpenBLAS calls on the calling thread, then restore.
 
-    `max-active-levels = 0` makes every parallel region inactive, which also overrides a
-    `num_threads(4)` clause (unlike `OMP_NUM_THREADS`). It is a no-op without libgomp.
+    OpenMP: `max-active-levels = 0` makes every parallel region inactive, which also overrides
+    CHOLMOD's `num_threads(4)` clause (unlike `OMP_NUM_THREADS`). OpenBLAS (the `libblas.so.3`
+    CHOLMOD links, when it is OpenBLAS): one thread, unless the user chose a count with
+    `OPENBLAS_NUM_THREADS`. Libraries that are not loaded, or are not these, are left alone.
     """
-    openmp = _loaded_openmp()
-    if openmp is None:
-        yield
-        return
-    previous = openmp.omp_get_max_active_levels()
-    openmp.omp_set_max_active_levels(0)
+    openmp = _loaded_library("libgomp.so.1")
+    blas = None if "OPENBLAS_NUM_THREADS" in os.environ else _loaded_library("libblas.so.3")
+    if blas is not None and not hasattr(blas, "openblas_set_num_threads"):
+        blas = None
+    levels = openmp.omp_get_max_active_levels() if openmp is not None else None
+    blas_threads = blas.openblas_get_num_threads() if blas is not None else None
+    if openmp is not None:
+        openmp.omp_set_max_active_levels(0)
+    if blas is not None:
+        blas.openblas_set_num_threads(1)
     try:
         yield
     finally:
-        openmp.omp_set_max_active_levels(previous)
+        if openmp is not None:
+            openmp.omp_set_max_active_levels(levels)
+        if blas is not None:
+            blas.openblas_set_num_threads(blas_threads)
 
 
 class CholmodSolver:
@@ -116,7 +125,7 @@ class CholmodSolver:
         self.factor = cholmod.analyze(pattern)
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        with serial_openmp():
+        with serial_native_threads():
             try:
                 self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
             except self._cholmod.CholmodNotPositiveDefiniteError as error:
