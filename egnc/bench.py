@@ -366,6 +366,7 @@ def _in_child(target: Callable, args: tuple, time_limit_s: float) -> tuple[str, 
     process = context.Process(target=_child_main, args=(sender, target, args), daemon=True)
     process.start()
     sender.close()  # so a child that dies without answering shows up as EOF
+    status, value = "interrupted", None  # what the cleanup sees if the wait itself is interrupted
     try:
         if receiver.poll(time_limit_s):
             status, value = receiver.recv()
