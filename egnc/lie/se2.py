@@ -35,6 +35,9 @@ __all__ = [
     "rminus",
     "from_xytheta",
     "to_xytheta",
+    "exp_components",
+    "log_components",
+    "right_jacobian_inverse_components",
 ]
 
 
@@ -92,24 +95,33 @@ def vee(X) -> np.ndarray:
 
 def exp(xi) -> np.ndarray:
     """Return `Exp([v, w]) = [[R(w), V(w) v], [0, 1]]` (Sola eqs. 156, 158): `(..., 3) -> (..., 3, 3)`."""
-    vx, vy, w = split(as_float_array(xi, (3,), "xi"), 1)
+    return _pose(*exp_components(*split(as_float_array(xi, (3,), "xi"), 1)))
+
+
+def exp_components(vx, vy, w) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return `(cos w, sin w, t_x, t_y)` of `Exp([v_x, v_y, w])`, all `(...)`; see `exp`."""
     sin_half, cos_half = sincos_half(w * w)
     f1, f2 = trig_coefficients(w * w, 2, sin_half, cos_half)
     # V = [[sin w / w, -(1 - cos w) / w], [(1 - cos w) / w, sin w / w]].
     b = w * f2
     sin_w = np.where(w < 0.0, -2.0, 2.0) * sin_half * cos_half  # sin w = sign(w) sin|w|
-    return _pose(1.0 - 2.0 * sin_half * sin_half, sin_w, f1 * vx - b * vy, b * vx + f1 * vy)
+    return 1.0 - 2.0 * sin_half * sin_half, sin_w, f1 * vx - b * vy, b * vx + f1 * vy
 
 
 def log(T) -> np.ndarray:
     """Return `Log(T) = [V(w)^-1 t, w]` with w in (-pi, pi] (Sola eq. 157): `(..., 3, 3) -> (..., 3)`."""
     r, (tx, ty) = _split_pose(as_float_array(T, (3, 3), "T"))
-    w = wrap_angle(np.arctan2(r[1, 0], r[0, 0]))
+    return join(np.stack(log_components(r[0, 0], r[1, 0], tx, ty)), 1)
+
+
+def log_components(cos_t, sin_t, tx, ty) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return `(v_x, v_y, w)` of the log of the pose with rotation `(cos t, sin t)` and translation `(t_x, t_y)`; see `log`."""
+    w = wrap_angle(np.arctan2(sin_t, cos_t))
     # V^-1 = [[a, w/2], [-w/2, a]], a = (w/2) cot(w/2); half-angle terms straight from R, no trig calls.
-    sin_half, cos_half = sincos_half_from_cos_sin(r[0, 0], r[1, 0])
+    sin_half, cos_half = sincos_half_from_cos_sin(cos_t, sin_t)
     a = _half_angle_cot(w * w, *trig_coefficients(w * w, 3, sin_half, cos_half), sin_half, cos_half)
     h = 0.5 * w
-    return join(np.stack([a * tx + h * ty, a * ty - h * tx, w]), 1)
+    return a * tx + h * ty, a * ty - h * tx, w
 
 
 def _half_angle_cot(theta2, f1, f2, f3, sin_half, cos_half) -> np.ndarray:
@@ -171,6 +183,13 @@ def right_jacobian(xi) -> np.ndarray:
 def right_jacobian_inverse(xi) -> np.ndarray:
     """Return `Jr([v, w])^-1`, inverting the blocks of eq. 163 in closed form: `(..., 3) -> (..., 3, 3)`."""
     vx, vy, w = split(as_float_array(xi, (3,), "xi"), 1)
+    a, h, p, q = right_jacobian_inverse_components(vx, vy, w)
+    zero, one = np.zeros_like(w), np.ones_like(w)
+    return _matrix3([[a, -h, p], [h, a, q], [zero, zero, one]])
+
+
+def right_jacobian_inverse_components(vx, vy, w) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return `(a, h, p, q)` with `Jr([v, w])^-1 = [[a, -h, p], [h, a, q], [0, 0, 1]]`, all `(...)`."""
     sin_half, cos_half = sincos_half(w * w)
     f1, f2, f3 = trig_coefficients(w * w, 3, sin_half, cos_half)
     # Jr = [[A, u], [0, 1]] with A = V(-w), so A^-1 = [[a, -w/2], [w/2, a]], a = (w/2) cot(w/2).
@@ -178,13 +197,21 @@ def right_jacobian_inverse(xi) -> np.ndarray:
     h = 0.5 * w
     c = w * f3
     ux, uy = c * vx - f2 * vy, f2 * vx + c * vy
-    zero, one = np.zeros_like(w), np.ones_like(w)
-    return _matrix3([[a, -h, h * uy - a * ux], [h, a, -(h * ux + a * uy)], [zero, zero, one]])
+    return a, h, h * uy - a * ux, -(h * ux + a * uy)
 
 
 def rplus(T, xi) -> np.ndarray:
     """Return `T Exp(xi)`: `(..., 3, 3), (..., 3) -> (..., 3, 3)`."""
-    return compose(T, exp(xi))
+    T, xi = broadcast_batch(as_float_array(T, (3, 3), "T"), 2, as_float_array(xi, (3,), "xi"), 1)
+    r, (tx, ty) = _split_pose(T)
+    cos_e, sin_e, tx_e, ty_e = exp_components(*split(xi, 1))
+    # compose(T, exp(xi)) on components, in the same order of operations.
+    return _pose(
+        r[0, 0] * cos_e + r[0, 1] * sin_e,
+        r[1, 0] * cos_e + r[1, 1] * sin_e,
+        r[0, 0] * tx_e + r[0, 1] * ty_e + tx,
+        r[1, 0] * tx_e + r[1, 1] * ty_e + ty,
+    )
 
 
 def rminus(A, B) -> np.ndarray:
