@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from egnc.factors import from_matrices, to_matrices
-from egnc.gnc import GncOptions, StageReport, classify_inliers, known_inlier_mask, run_gnc
+from egnc.factors import BetweenFactors, from_matrices, to_matrices
+from egnc.gnc import GncOptions, StageReport, classify_inliers, known_inlier_mask, refine_on_inliers, run_gnc
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
-from egnc.connectivity import connected_components
-from egnc.least_squares import Problem, SolverOptions, solve_least_squares
+from egnc.least_squares import SolverOptions
 from egnc.linear_solvers import resolve_name
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 
@@ -107,20 +106,23 @@ def solve(
         graph = read_g2o(graph)
     known = known_inlier_mask(graph, known_inliers)
     robust = ~known
-    schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)  # type: ignore[arg-type]
     backend = resolve_name(linear_solver)
-    problem = Problem.from_graph(graph, backend)
+    factors = BetweenFactors.from_graph(graph)
     initial = to_matrices(graph.dim, graph.poses)
-    initial_r = problem.factors.whitened_norms(problem.factors.residuals(initial))
-    outcome = run_gnc(problem, initial, schedule, robust, options, gnc_options.max_stages)
-    inliers = classify_inliers(outcome.residual_norms, robust, graph.tangent_dim, gnc_options.outlier_quantile)
+    initial_r = factors.whitened_norms(factors.residuals(initial))
+    refine = method in GRADUATED_METHODS and gnc_options.refine
+    stage_options = options
+    if refine:  # the refinement converges tightly; the stages need not
+        stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, gnc_options.stage_rel_cost_tol))
+    schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)  # type: ignore[arg-type]
+    outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend)
     poses, stages = outcome.poses, outcome.stages
-    refine = gnc_options.refine and method in GRADUATED_METHODS and not inliers.all()
-    if refine and connected_components(graph.num_poses, graph.edges[inliers])[0] == 1:
-        refined = solve_least_squares(Problem.from_graph(graph.subgraph_edges(inliers), backend), poses, None, options)
-        poses = refined.poses
-        stages += (StageReport(np.nan, np.nan, np.nan, refined.iterations, refined.cost, refined.time_s, refined.status),)
-    r = problem.factors.whitened_norms(problem.factors.residuals(poses))
+    if refine:
+        poses, inliers, refinements = refine_on_inliers(graph, poses, robust, options, gnc_options, backend)
+        stages += refinements
+    r = factors.whitened_norms(factors.residuals(poses))
+    if not refine:
+        inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
     return Result(
         graph=graph.with_poses(from_matrices(graph.dim, poses)),
         method=method,

@@ -324,8 +324,7 @@ def _solve_and_score(case: BenchCase, spec: MethodSpec, linear_solver: str) -> d
         # GTSAM's outliers by egnc's rule: r^2 > chi2.ppf(0.95, d) on the loop closures at its poses.
         factors = BetweenFactors.from_graph(case.graph)
         r = factors.whitened_norms(factors.residuals(to_matrices(case.graph.dim, poses)))
-        quantile = GncOptions().outlier_quantile
-        predicted = ~classify_inliers(r, ~case.known_inliers, case.graph.tangent_dim, quantile)
+        predicted = ~classify_inliers(r, ~case.known_inliers, case.graph.tangent_dim, GncOptions())
         stages = -1
     else:
         result = solve(

@@ -107,6 +107,7 @@ def report_dict(result: Result) -> dict:
                 "cost": stage.cost,
                 "time_s": stage.time_s,
                 "status": stage.status,
+                "active_edges": stage.active_edges,
             }
             for stage in result.stages
         ],

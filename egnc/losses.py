@@ -37,6 +37,10 @@ class KernelLoss:
         """Per-edge IRLS weight `(E,)`."""
         return np.where(self.robust, self.kernel.weight(r, self.mu), 1.0)
 
+    def subset(self, keep: np.ndarray) -> KernelLoss:
+        """The same loss over the edges where `keep` `(E,)` is true."""
+        return KernelLoss(self.kernel, self.mu[keep], self.robust[keep])
+
 
 @dataclass(frozen=True, eq=False)
 class FixedWeightLoss:
@@ -58,3 +62,7 @@ class FixedWeightLoss:
     def weight(self, r: np.ndarray) -> np.ndarray:
         """Per-edge weight `(E,)`, independent of `r`."""
         return self.weights
+
+    def subset(self, keep: np.ndarray) -> FixedWeightLoss:
+        """The same loss over the edges where `keep` `(E,)` is true."""
+        return FixedWeightLoss(self.weights[keep])

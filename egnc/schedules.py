@@ -39,7 +39,6 @@ from scipy.stats import chi2
 
 from egnc.errors import EgncError
 from egnc.kernels import Kernel, gnc_barc2, make_kernel
-from egnc.least_squares import EdgeLoss
 from egnc.losses import FixedWeightLoss, KernelLoss
 from egnc.mu_star import mu_star
 
@@ -56,7 +55,7 @@ ThresholdConvention = Literal["squared", "distance"]
 class Stage:
     """One GNC stage: the loss to minimize and the per-edge `mu` it uses (`nan` where none)."""
 
-    loss: EdgeLoss
+    loss: KernelLoss | FixedWeightLoss
     mu: np.ndarray
 
 

@@ -23,7 +23,7 @@ REPORT_KEYS = {
     "message", "converged", "poses", "edges", "loop_closures", "known_inliers", "rejected_edges",
     "stages", "timings_s",
 }  # fmt: skip
-STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status"}
+STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges"}
 
 
 def egnc_solve(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:
