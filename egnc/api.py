@@ -9,7 +9,15 @@ from pathlib import Path
 import numpy as np
 
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
-from egnc.gnc import GncOptions, StageReport, classify_inliers, known_inlier_mask, refine_on_inliers, run_gnc
+from egnc.gnc import (
+    GncOptions,
+    StageCallback,
+    StageReport,
+    classify_inliers,
+    known_inlier_mask,
+    refine_on_inliers,
+    run_gnc,
+)
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
 from egnc.least_squares import SolverOptions
@@ -82,6 +90,7 @@ def solve(
     linear_solver: str = "auto",
     options: SolverOptions | None = None,
     gnc_options: GncOptions | None = None,
+    on_stage: StageCallback | None = None,
 ) -> Result:
     """Optimize a pose graph, rejecting false loop closures with a robust method.
 
@@ -95,6 +104,8 @@ def solve(
             `"cholmod"` or `"scipy"`.
         options: options of each stage's GN/LM solve (tolerances, iteration limit).
         gnc_options: kernel shape, threshold convention, outlier quantile, stage limit.
+        on_stage: called with each `StageReport` as soon as its stage ends (e.g. to show
+            progress); the refinement rounds of graduated methods are stages too.
 
     Returns:
         The `Result`, whose `graph` holds the optimized poses.
@@ -115,10 +126,10 @@ def solve(
     if refine:  # the refinement converges tightly; the stages need not
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, gnc_options.stage_rel_cost_tol))
     schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)  # type: ignore[arg-type]
-    outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend)
+    outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend, on_stage)
     poses, stages = outcome.poses, outcome.stages
     if refine:
-        poses, inliers, refinements = refine_on_inliers(graph, poses, robust, options, gnc_options, backend)
+        poses, inliers, refinements = refine_on_inliers(graph, poses, robust, options, gnc_options, backend, on_stage)
         stages += refinements
     r = factors.whitened_norms(factors.residuals(poses))
     if not refine:

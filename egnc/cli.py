@@ -10,10 +10,11 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from egnc import __version__
-from egnc.api import METHODS, Result, solve
+from egnc.api import METHODS, Result, StageReport, solve
 from egnc.errors import EgncError
 from egnc.io import read_g2o, write_g2o
 from egnc.io.atomic import atomic_text_file
@@ -137,6 +138,24 @@ def summary(result: Result) -> str:
     )
 
 
+def _print_stage_progress() -> Callable[[StageReport], None]:
+    """A callback printing one progress line per finished stage on stderr."""
+    count = 0
+
+    def show(stage: StageReport) -> None:
+        nonlocal count
+        count += 1
+        mu = "least squares" if math.isnan(stage.mu_mean) else f"mu {stage.mu_min:.3g}..{stage.mu_max:.3g}"
+        print(
+            f"stage {count}: {mu}, {stage.iterations} iterations, cost {stage.cost:.6g},"
+            f" {stage.active_edges} edges, {stage.time_s:.2f} s",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `egnc-solve`; returns the process exit code."""
     args = build_parser().parse_args(argv)
@@ -149,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
             known_inliers=args.known_inliers,
             linear_solver=args.linear_solver,
             options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
+            on_stage=None if args.quiet else _print_stage_progress(),
         )
         if args.output is not None:
             write_g2o(result.graph, args.output, keep_edges=result.inliers if args.drop_outliers else None)

@@ -9,6 +9,7 @@ outliers (DESIGN.md section 4); known inliers never are.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,6 +98,10 @@ class StageReport:
     active_edges: int
 
 
+StageCallback = Callable[[StageReport], None]
+"""Receives each stage's report as soon as the stage ends."""
+
+
 @dataclass(frozen=True, eq=False)
 class GncOutcome:
     """What the driver hands back to `egnc.solve`.
@@ -148,6 +153,7 @@ def run_gnc(
     solver_options: SolverOptions,
     gnc_options: GncOptions,
     linear_solver: str,
+    on_stage: StageCallback | None = None,
 ) -> GncOutcome:
     """Run `schedule`'s stages on `graph` from `initial_poses` `(N, n, n)`.
 
@@ -163,6 +169,7 @@ def run_gnc(
         solver_options: options of each stage's GN/LM solve.
         gnc_options: stage limit and pruning weight.
         linear_solver: resolved backend name, `"cholmod"` or `"scipy"`.
+        on_stage: called with each `StageReport` as soon as its stage ends (progress display).
     """
     factors = BetweenFactors.from_graph(graph)
     active = np.ones(graph.num_edges, dtype=bool)
@@ -193,6 +200,8 @@ def run_gnc(
                 active_edges=int(active.sum()),
             )
         )
+        if on_stage is not None:
+            on_stage(reports[-1])
         for phase, seconds in solution.timings.items():
             timings[phase] = timings.get(phase, 0.0) + seconds
         status, message = solution.status, solution.message
@@ -235,6 +244,7 @@ def refine_on_inliers(
     solver_options: SolverOptions,
     gnc_options: GncOptions,
     linear_solver: str,
+    on_stage: StageCallback | None = None,
 ) -> tuple[np.ndarray, np.ndarray, tuple[StageReport, ...]]:
     """Classify, re-solve least squares on the inliers, and repeat until the classification holds.
 
@@ -262,6 +272,8 @@ def refine_on_inliers(
                 np.nan, np.nan, np.nan, refined.iterations, refined.cost, refined.time_s, refined.status, int(inliers.sum())
             )
         )
+        if on_stage is not None:
+            on_stage(reports[-1])
         r = factors.whitened_norms(factors.residuals(poses))
         reclassified = classify_inliers(r, robust, d, gnc_options)
         if np.array_equal(reclassified, inliers):
