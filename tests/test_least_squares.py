@@ -97,7 +97,11 @@ def test_sparse_solver_matches_dense_solve(dataset_path, backend):
     expected = dense_gauss_newton(graph, iterations=100)
     tight = SolverOptions(rel_cost_tol=0.0, gradient_tol=1e-13, max_iterations=500)
     result = solve(graph, "l2", linear_solver=backend, options=tight)
-    np.testing.assert_allclose(to_matrices(3, result.graph.poses), expected, atol=1e-9)
+    # LM judges steps by the cost, which on this graph cannot resolve a decrease below about
+    # eps * cost ~ 2e-15 (GN converges only linearly here: the optimum has cost 9.3). Where it
+    # stops in that noise depends on rounding: over 20 starts perturbed by 1e-6, the final pose
+    # error ranged up to 1.6e-8 (median 4e-10) with either backend and summation order.
+    np.testing.assert_allclose(to_matrices(3, result.graph.poses), expected, atol=1e-7)
 
 
 @pytest.mark.parametrize("name", sorted(GTSAM_OPTIMA))
