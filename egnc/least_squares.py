@@ -39,7 +39,7 @@ import numpy as np
 from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.graph import PoseGraph
-from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, make_linear_solver, resolve_name
+from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, block_order, make_linear_solver, resolve_name
 from egnc.normal_equations import NormalEquationsPattern
 
 STATUS_MESSAGES = {
@@ -159,10 +159,14 @@ class Problem:
         fixed = graph.fixed.copy()
         if not fixed.any():
             fixed[0] = True
+        # Unknown blocks in a fill-reducing order of the free poses, computed once.
+        free_block = np.cumsum(~fixed) - 1
+        joined = graph.edges[~fixed[graph.edges].any(axis=1)]
+        order = block_order(backend, int(np.count_nonzero(~fixed)), free_block[joined])
         pattern = NormalEquationsPattern.build(
-            graph.edges, fixed, graph.tangent_dim, lower_only=backend == "cholmod"
+            graph.edges, fixed, graph.tangent_dim, lower_only=backend == "cholmod", block_order=order
         )
-        solver = make_linear_solver(backend, pattern.indptr, pattern.indices)
+        solver = make_linear_solver(backend, pattern.indptr, pattern.indices, ordered=True)
         return cls(graph, BetweenFactors.from_graph(graph), pattern, solver)
 
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:

@@ -1,15 +1,23 @@
 """Sparse symmetric positive-definite solvers for the normal equations, behind one interface.
 
-- `cholmod`: CHOLMOD through scikit-sparse (optional extra). The fill-reducing ordering and the
-  symbolic factorization are computed once per pattern; each solve only refactorizes numerically.
-  CHOLMOD reads the lower triangle only, so the pattern stores just that. The calls run on
+Both order the unknowns once, at the level of the `d x d` pose blocks (`block_order`): the
+normal-equations pattern is then built in that order, and every factorization uses it as is.
+A block ordering is cheaper to compute than a scalar one (N instead of d N vertices) and keeps
+each pose's `d` unknowns together, which suits supernodes.
+
+- `cholmod`: CHOLMOD through scikit-sparse (optional extra). AMD on the pose graph; the
+  symbolic factorization is computed once per pattern and each solve only refactorizes
+  numerically (supernodal or simplicial, as CHOLMOD decides from the flop count). CHOLMOD reads
+  the lower triangle only, so the pattern stores just that. The calls run on
   the calling thread only (`serial_native_threads`): CHOLMOD 5.x scatters each supernode in an
   OpenMP loop with a compiled-in team of 4 threads, far too little work for a fork/join per
   supernode, and OpenBLAS's worker threads must be woken for every call after the NumPy phases
   of an iteration. On 2 shared cores each doubled the factorization (see BENCHMARKS.md).
-- `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (minimum-degree ordering
-  on `A + A^T`, diagonal pivoting), which is how SuperLU is best used on SPD matrices. SciPy has
-  no sparse Cholesky; this is the always-available fallback.
+- `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (diagonal pivoting),
+  which is how SuperLU is best used on SPD matrices. Its minimum-degree ordering on `A + A^T`
+  is computed once on the pose graph; the factorizations then take the matrix in natural order
+  instead of reordering it every time. SciPy has no sparse Cholesky; this is the
+  always-available fallback.
 """
 
 from __future__ import annotations
@@ -106,6 +114,34 @@ def serial_native_threads() -> Iterator[None]:
             blas.openblas_set_num_threads(blas_threads)
 
 
+def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarray:
+    """Fill-reducing order of the unknown blocks for backend `name` (`"cholmod"` or `"scipy"`).
+
+    Args:
+        name: resolved backend name.
+        num_blocks: number of blocks (free poses).
+        block_pairs: `(K, 2)` block indices joined by an edge (either direction, repeats allowed).
+
+    Returns:
+        `(num_blocks,)` permutation: block `order[k]` goes to position `k` (`P A P^T = A[order][:, order]`).
+    """
+    pairs = np.asarray(block_pairs, dtype=np.int64).reshape(-1, 2)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    rows, cols = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
+    # A diagonally dominant matrix with the pose graph's pattern: the orderings read only the
+    # pattern, but SuperLU factorizes what it orders.
+    adjacency = sp.csc_matrix((np.full(len(rows), -1.0), (rows, cols)), shape=(num_blocks, num_blocks))
+    adjacency.sum_duplicates()
+    degree = -np.asarray(adjacency.sum(axis=0)).ravel()
+    matrix = (adjacency + sp.diags(degree + 1.0)).tocsc()
+    if name == "cholmod":
+        from sksparse import cholmod
+
+        return np.asarray(cholmod.analyze(sp.tril(matrix, format="csc"), ordering_method="amd").P(), dtype=np.int64)
+    lu = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    return np.argsort(lu.perm_c).astype(np.int64)
+
+
 class CholmodSolver:
     """CHOLMOD Cholesky with the symbolic analysis done once.
 
@@ -115,14 +151,14 @@ class CholmodSolver:
 
     name = "cholmod"
 
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray):
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False):
         from sksparse import cholmod
 
         self._cholmod = cholmod
         self._indices = indices.astype(np.int32)
         self._indptr = indptr.astype(np.int32)
         pattern = _matrix(np.ones(len(indices)), self._indices, self._indptr)
-        self.factor = cholmod.analyze(pattern)
+        self.factor = cholmod.analyze(pattern, ordering_method="natural" if ordered else "default")
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         with serial_native_threads():
@@ -138,16 +174,17 @@ class ScipySolver:
 
     name = "scipy"
 
-    def __init__(self, indptr: np.ndarray, indices: np.ndarray):
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False):
         self._indices = indices.astype(np.int32)
         self._indptr = indptr.astype(np.int32)
+        self._permc_spec = "NATURAL" if ordered else "MMD_AT_PLUS_A"
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         matrix = _matrix(data, self._indices, self._indptr)
         try:
             lu = spla.splu(
                 matrix,
-                permc_spec="MMD_AT_PLUS_A",
+                permc_spec=self._permc_spec,
                 diag_pivot_thresh=0.0,
                 options={"SymmetricMode": True},
             )
@@ -156,8 +193,11 @@ class ScipySolver:
         return lu.solve(rhs)
 
 
-def make_linear_solver(name: str, indptr: np.ndarray, indices: np.ndarray) -> LinearSolver:
-    """Create the backend `name` (`"cholmod"` or `"scipy"`, already resolved) for one CSC pattern."""
+def make_linear_solver(name: str, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False) -> LinearSolver:
+    """Create the backend `name` (`"cholmod"` or `"scipy"`, already resolved) for one CSC pattern.
+
+    `ordered`: the pattern is already in a fill-reducing order (`block_order`); keep it.
+    """
     if name == "cholmod":
-        return CholmodSolver(indptr, indices)
-    return ScipySolver(indptr, indices)
+        return CholmodSolver(indptr, indices, ordered)
+    return ScipySolver(indptr, indices, ordered)

@@ -68,6 +68,28 @@ def test_assembly_matches_dense(d, lower_only, fixed_rows):
     np.testing.assert_allclose(data[pattern.diagonal_slots], np.diag(H_ref), rtol=1e-12)
 
 
+@pytest.mark.parametrize("d", [3, 6])
+@pytest.mark.parametrize("lower_only", [False, True])
+def test_assembly_in_a_block_order_is_the_permuted_dense_system(d, lower_only):
+    rng = np.random.default_rng(d + 100 * lower_only)
+    num_poses = 9
+    edges, lin, information, weights = random_case(rng, num_poses, d)
+    fixed = np.zeros(num_poses, dtype=bool)
+    fixed[[0, 5]] = True
+    order = rng.permutation(num_poses - 2)  # unknown block k is the order[k]-th free pose
+    pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only, block_order=order)
+    data, g = pattern.assemble(lin, information, weights)
+    H_ref, g_ref = dense_normal_equations(edges, fixed, d, lin, information, weights)
+    scalar = (order[:, None] * d + np.arange(d)).ravel()
+    H_ref, g_ref = H_ref[scalar][:, scalar], g_ref[scalar]
+    expected = np.tril(H_ref) if lower_only else H_ref
+    np.testing.assert_allclose(to_dense(pattern, data), expected, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(g, g_ref, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(data[pattern.diagonal_slots], np.diag(H_ref), rtol=1e-12)
+    free_rows = np.flatnonzero(~fixed)
+    np.testing.assert_array_equal(pattern.free_index[free_rows[order]], np.arange(num_poses - 2))
+
+
 def test_pattern_is_valid_csc():
     rng = np.random.default_rng(1)
     edges, *_ = random_case(rng, 12, 3)
