@@ -125,7 +125,7 @@ def solve(
     stage_options = options
     if refine:  # the refinement converges tightly; the stages need not
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, gnc_options.stage_rel_cost_tol))
-    schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)  # type: ignore[arg-type]
+    schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
     outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend, on_stage)
     poses, stages = outcome.poses, outcome.stages
     if refine:

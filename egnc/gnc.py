@@ -1,9 +1,17 @@
-"""The graduated non-convexity driver: run a schedule's stages, each a warm-started IRLS solve.
+"""The graduated non-convexity driver: run a schedule's stages, each an IRLS solve.
 
 Stage k minimizes the loss the schedule chose from stage k-1's residuals (`egnc.schedules`) with
-the sparse GN/LM solver (`egnc.least_squares`), starting from stage k-1's poses. After the last
-stage, loop closures (robust edges) with `r^2 > chi2.ppf(outlier_quantile, d)` are classified as
-outliers (DESIGN.md section 4); known inliers never are.
+the sparse GN/LM solver (`egnc.least_squares`), starting from the initial guess (GTSAM's
+`GncOptimizer` protocol) or, with `warm_start`, from stage k-1's poses. Loop closures whose weight
+became negligible leave the factorization (`prune_weight`). After the last stage, loop closures
+(robust edges) with `r^2 > chi2.ppf(outlier_quantile, d)` are classified as outliers (DESIGN.md
+section 4; `threshold="distance"` compares `r` instead); known inliers never are. Graduated
+methods then re-solve least squares on the accepted edges (`refine_on_inliers`).
+
+References:
+    H. Yang, P. Antonante, V. Tzoumas, L. Carlone, "Graduated Non-Convexity for Robust Spatial
+    Perception", RA-L 2020 (the alternation of weight and variable updates).
+    GTSAM, `gtsam/nonlinear/GncOptimizer.h` (each stage restarts from the initial values).
 """
 
 from __future__ import annotations
@@ -14,12 +22,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from egnc.errors import EgncError
-from egnc.graph import PoseGraph
 from egnc.connectivity import connected_components
+from egnc.errors import EgncError
 from egnc.factors import BetweenFactors
+from egnc.graph import PoseGraph
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares
-from egnc.schedules import Schedule, Stage, exceeds
+from egnc.schedules import Schedule, Stage, ThresholdConvention, exceeds
 
 
 @dataclass(frozen=True)
@@ -28,7 +36,7 @@ class GncOptions:
 
     Attributes:
         c: shape of the SIG kernel (egnc, risam; riSAM uses 3) and of Geman-McClure (gm).
-        threshold: how residuals meet chi-square quantiles, in egnc's strong-outlier test and in
+        threshold: `"squared"` or `"distance"`: how residuals meet chi-square quantiles, in egnc's strong-outlier test and in
             the final outlier report: `"squared"` (`r^2` against the quantile, statistically
             consistent) or `"distance"` (`r` against it, as the authors' C++ reference).
         outlier_quantile: a loop closure is rejected when `r^2` (or `r`, see `threshold`) exceeds
@@ -54,7 +62,7 @@ class GncOptions:
     """
 
     c: float = 3.0
-    threshold: str = "squared"
+    threshold: ThresholdConvention = "squared"
     outlier_quantile: float = 0.95
     max_stages: int = 100
     refine: bool = True
@@ -230,7 +238,7 @@ def classify_inliers(r: np.ndarray, robust: np.ndarray, d: int, options: GncOpti
     With `options.threshold == "squared"` the test is `r^2 > chi2.ppf(q, d)` (DESIGN.md section 4);
     with `"distance"` it is `r > chi2.ppf(q, d)`, as in the authors' C++ reference.
     """
-    return ~(robust & exceeds(r, options.outlier_quantile, d, options.threshold))  # type: ignore[arg-type]
+    return ~(robust & exceeds(r, options.outlier_quantile, d, options.threshold))
 
 
 MAX_REFINEMENTS = 3
