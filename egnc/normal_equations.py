@@ -81,44 +81,66 @@ class NormalEquationsPattern:
             raise ValueError(f"block_order must be a permutation of range({num_free})")
         free_index[free_rows[order]] = np.arange(num_free)
         size = num_free * d
-        n1 = max(size, 1)  # key stride: key = column * n1 + row
 
-        # Stored scalars of H: every diagonal block, and both off-diagonal blocks of every pair of
-        # free poses an edge joins; in lower mode only those with row >= column.
+        # Stored blocks of H: every diagonal block, and both off-diagonal blocks of every pair of
+        # free poses an edge joins (only the lower one in lower mode). Keys sort them as CSC does.
         var = free_index[np.asarray(edges, dtype=np.int64).reshape(-1, 2)]  # (E, 2)
         both_free = (var >= 0).all(axis=1)
-        pairs = np.concatenate([np.repeat(np.arange(num_free), 2).reshape(-1, 2), var[both_free], var[both_free, ::-1]])
+        diagonal_blocks = np.repeat(np.arange(num_free), 2).reshape(-1, 2)
+        pairs = np.concatenate([diagonal_blocks, var[both_free], var[both_free, ::-1]])  # (row, col)
+        if lower_only:
+            pairs = pairs[pairs[:, 0] >= pairs[:, 1]]
         stride = max(num_free, 1)
-        block_row, block_col = np.divmod(np.unique(pairs[:, 0] * stride + pairs[:, 1]), stride)
-        a, b = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
-        rows = (block_row[:, None, None] * d + a).ravel()
-        cols = (block_col[:, None, None] * d + b).ravel()
-        if lower_only:
-            keep = rows >= cols
-            rows, cols = rows[keep], cols[keep]
-        keys = np.sort(cols * n1 + rows)  # CSC order: by column, then row
-        indices = keys % n1
+        block_keys = np.unique(pairs[:, 1] * stride + pairs[:, 0])
+        block_col, block_row = np.divmod(block_keys, stride)
+        col_start = np.searchsorted(block_keys, np.arange(num_free + 1) * stride)
+        rank = np.arange(len(block_keys)) - col_start[block_col]  # position within its block column
+
+        # Scalar column b of block column J holds d rows per block, except the diagonal block in
+        # lower mode (the first block of its column), which holds rows b..d-1.
+        skipped = np.arange(d) if lower_only else np.zeros(d, dtype=np.int64)
+        counts = np.diff(col_start)[:, None] * d - skipped
         indptr = np.zeros(size + 1, dtype=np.int64)
-        np.cumsum(np.bincount(keys // n1, minlength=size), out=indptr[1:])
-        nnz = len(keys)
+        np.cumsum(counts.ravel(), out=indptr[1:])
+        nnz = int(indptr[-1])
 
-        # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes.
-        r = np.arange(2 * d)
-        row_var = var[:, r // d]  # (E, 2d): unknown block of P's row r
-        grow = row_var * d + r % d
-        slots = np.full((len(var), 2 * d, 2 * d + 1), nnz + size, dtype=np.int64)
-        gcol = grow[:, None, :]  # column c < 2d of P is unknown grow[c]
-        stored = (row_var[:, :, None] >= 0) & (row_var[:, None, :] >= 0)
+        # slot[t, a, b]: data slot of scalar (a, b) of stored block t (unused where not stored).
+        a, b = np.arange(d)[:, None], np.arange(d)[None, :]
+        k = rank[:, None, None]
+        if lower_only:  # the diagonal block (k = 0) holds rows b..d-1, then d rows per block
+            offset = np.where(k == 0, a - b, (d - b) + (k - 1) * d + a)
+        else:
+            offset = k * d + a
+        slot = indptr[block_col[:, None, None] * d + b] + offset
+        stored = np.ones(slot.shape, dtype=bool)
         if lower_only:
-            stored &= grow[:, :, None] >= gcol
-        query = (gcol * n1 + grow[:, :, None])[stored]
-        found = np.searchsorted(keys, query)
-        assert np.array_equal(keys[found], query), "pattern misses an entry"
-        slots[:, :, : 2 * d][stored] = found
-        slots[:, :, 2 * d] = np.where(row_var >= 0, nnz + grow, nnz + size)
+            stored[rank == 0] = a >= b
+        indices = np.empty(nnz, dtype=np.int64)
+        indices[slot[stored]] = np.broadcast_to(block_row[:, None, None] * d + a, slot.shape)[stored]
 
-        diagonal = np.arange(size)
-        diagonal_slots = np.searchsorted(keys, diagonal * n1 + diagonal)
+        # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes: row r and column c < 2d
+        # of P belong to the edge's poses r // d and c // d, components r % d and c % d.
+        block_of = np.full((len(var), 2, 2), -1, dtype=np.int64)  # stored block of (row pose, column pose)
+        for row_side in range(2):
+            for col_side in range(2):
+                rv, cv = var[:, row_side], var[:, col_side]
+                kept = (rv >= 0) & (cv >= 0) & ((rv >= cv) if lower_only else True)
+                query = cv[kept] * stride + rv[kept]
+                found = np.searchsorted(block_keys, query)
+                assert np.array_equal(block_keys[found], query), "pattern misses a block"
+                block_of[kept, row_side, col_side] = found
+        sides = np.arange(2 * d) // d
+        component = np.arange(2 * d) % d
+        block = block_of[:, sides[:, None], sides[None, :]]  # (E, 2d, 2d)
+        flat = (np.maximum(block, 0) * d + component[:, None]) * d + component[None, :]
+        edge_stored = (block >= 0) & stored.reshape(-1)[flat]
+        row_var = var[:, sides]  # (E, 2d)
+        slots = np.empty((len(var), 2 * d, 2 * d + 1), dtype=np.int64)
+        slots[:, :, : 2 * d] = np.where(edge_stored, slot.reshape(-1)[flat], nnz + size)
+        slots[:, :, 2 * d] = np.where(row_var >= 0, nnz + row_var * d + component, nnz + size)
+
+        diagonal = np.flatnonzero(block_col == block_row)  # one per free pose, in order
+        diagonal_slots = slot[diagonal][:, np.arange(d), np.arange(d)].ravel()
         return cls(size, indptr, indices, lower_only, slots, diagonal_slots, free_index)
 
     def assemble(
