@@ -78,12 +78,20 @@ def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc
     return sp.csc_matrix((data, indices, indptr), shape=(n, n), copy=False)
 
 
+_LOADED: dict[str, ctypes.CDLL] = {}
+
+
 def _loaded_library(name: str) -> ctypes.CDLL | None:
-    """A handle on shared library `name` if something (CHOLMOD) already loaded it, else None."""
-    try:
-        return ctypes.CDLL(name, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
-    except (OSError, AttributeError):  # not loaded, or no RTLD_NOLOAD on this platform
-        return None
+    """A handle on shared library `name` if something (CHOLMOD) already loaded it, else None.
+
+    Handles are cached (creating one costs about 0.1 ms, comparable to a small factorization).
+    """
+    if name not in _LOADED:
+        try:
+            _LOADED[name] = ctypes.CDLL(name, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+        except (OSError, AttributeError):  # not loaded, or no RTLD_NOLOAD on this platform
+            return None
+    return _LOADED[name]
 
 
 @contextmanager
