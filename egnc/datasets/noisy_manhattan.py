@@ -1,0 +1,254 @@
+"""Noisy-Manhattan datasets: the EGNC-PGO paper's second experiment (DESIGN.md section 5).
+
+Starting from a ground-truth trajectory and the edges of a pose graph (manhattanOlson3500 with
+its outlier-free optimum as ground truth, or a `grid_world`), every measurement is synthesised
+from the ground truth:
+
+- odometry (consecutive ids): `Z = (X_i^-1 X_j) Exp(n)`, `n ~ N(0, diag(odometry_sigma^2))`;
+- inlier loop closures: the same with `loop_sigma` (zero by default: exact measurements);
+- outliers: a seeded share `outlier_fraction` of the loop closures, chosen uniformly without
+  replacement, measure `(X_i^-1 X_j) Exp(p)` with `p ~ N(0, diag(outlier_sigma^2))`, and a draw
+  is kept only if the loop really is an outlier: its squared whitened error `e^T Omega e`,
+  `e = Log(Z^-1 X_i^-1 X_j)`, exceeds `chi2.ppf(0.95, d)` (the rule that classifies outliers
+  after a solve, DESIGN.md section 4) both at the ground truth and at the outlier-free optimum,
+  the least-squares optimum of the noisy graph without the outliers. Rejected draws are redrawn.
+  The second test matters: odometry noise moves the optimum away from the ground truth, and a
+  draw just above the threshold at the ground truth can fall below it at the optimum (6 of 630
+  on manhattanOlson3500 with seed 1), where even a perfect rejection would then be scored as a
+  miss. The outlier-free optimum does not depend on the outliers' measurements, so it is
+  solved once, before they are drawn.
+
+Every edge keeps its information matrix from the source graph, and its place in the edge order
+(the outliers are the source's own loop closures, perturbed, so their position gives nothing
+away). The initial guess composes the noisy odometry from the ground-truth first pose.
+
+How this follows the EGNC-PGO repository. Its generator script is not published (riSAM's
+`make-gridworld-dataset`, which it inherits, makes identity-measurement outliers instead); its
+one shipped case, `manhattan_noisy.irl`, was read instead (`../shared/datasets`). There, the
+Manhattan grid trajectory is the ground truth (the exact grid motions behind
+manhattanOlson3500's odometry); odometry is that motion plus noise on x and theta only
+(standard deviations about 0.061 m and 0.0152 rad, clipped at one standard deviation, so about
+a third of the draws sit on the clip value); the loop closures are not manhattanOlson3500's
+(733 instead of 2099, 18 % shared) but join revisits of the same cell, the inliers measure the
+ground truth exactly, and 30.4 % (223 of 733) are outliers whose
+whitened error is large (squared errors 90 to 134, against a threshold of 7.8): a rotation
+error of 1.366 rad (78 degrees) each and translation errors of 0.4 to 1.1 m; every edge has
+the same isotropic information 44.17. Followed here: ground truth as the source of every
+measurement, exact inlier loops by default, noisy odometry, a 30 % share of the loop
+closures perturbed in place, outliers far above the threshold. Differences, chosen on purpose:
+Gaussian noise on every tangent component without clipping (pass per-component sigmas such as
+`(0.061, 0.0, 0.0152)` for x-and-theta-only noise), Gaussian outlier perturbations
+(`DEFAULT_OUTLIER_SIGMA`, of the shipped case's order of magnitude) instead of one fixed
+rotation offset, and the source's own information matrices.
+
+Reproducibility: one `np.random.default_rng(seed)` stream in a fixed order: the outlier
+choice, one `(E, d)` standard-normal block for the measurement noise of every edge, then
+`(k, d)` blocks for the outlier perturbations until all k remaining outliers are accepted.
+Measurements and initial poses are rounded to `decimals` places, as in `grid_world`, and the
+outlier test is made on the rounded measurement. The outlier-free optimum is solved with SciPy's
+sparse solver from the ground truth (`egnc.solve(..., "l2", linear_solver="scipy")`), so the
+result does not depend on optional extras.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.stats
+
+from egnc.api import solve
+from egnc.errors import EgncError
+from egnc.factors import from_matrices, group_of, to_matrices
+from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.initialize import initialize_poses
+from egnc.io.irl import IrlLog
+
+__all__ = [
+    "ACCEPT_QUANTILE",
+    "DEFAULT_ODOMETRY_SIGMA",
+    "DEFAULT_OUTLIER_SIGMA",
+    "NoisyGraph",
+    "make_noisy_manhattan",
+    "outlier_count",
+]
+
+ACCEPT_QUANTILE = 0.95
+"""An outlier draw is kept when its squared whitened error exceeds `chi2.ppf(ACCEPT_QUANTILE, d)`."""
+
+DEFAULT_ODOMETRY_SIGMA = (0.06, 0.015)
+"""Odometry noise `(translation m, rotation rad)`: the shipped case's 0.061 m and 0.0152 rad."""
+
+DEFAULT_OUTLIER_SIGMA = (0.5, 1.0)
+"""Outlier perturbation `(translation m, rotation rad)`: the shipped case has 0.4-1.1 m and 1.37 rad."""
+
+_MAX_ROUNDS = 1000
+"""Give up when some outlier is still rejected after this many redraws."""
+
+
+@dataclass(frozen=True, eq=False)
+class NoisyGraph:
+    """A noisy-Manhattan dataset: the graph, its outlier labels and its ground truth.
+
+    Attributes:
+        graph: the source's edges and information with synthesised measurements; initial guess =
+            the noisy odometry composed from the ground-truth first pose.
+        is_outlier: `(E,)` bool, the perturbed loop closures, in `graph`'s edge order.
+        ground_truth: `(N, P)` the ground truth every measurement was made from.
+        reference: `(N, P)` the outlier-free optimum: the least-squares optimum of `graph`
+            without the outliers, what a perfect robust solve returns.
+    """
+
+    graph: PoseGraph
+    is_outlier: np.ndarray
+    ground_truth: np.ndarray
+    reference: np.ndarray
+
+    def to_irl(self, name: str = "noisy_manhattan", *, date: str | None = None, notes: str = "") -> IrlLog:
+        """The dataset as an IRL log whose LOOP entries carry the labels (`write_irl` writes it)."""
+        return IrlLog.from_graph(self.graph, self.is_outlier, name=name, date=date, notes=notes)
+
+
+def outlier_count(num_loops: int, fraction: float) -> int:
+    """Loop closures to perturb: `round(fraction * num_loops)`, halves rounded up."""
+    return math.floor(fraction * num_loops + 0.5)
+
+
+def make_noisy_manhattan(
+    graph: PoseGraph,
+    ground_truth: np.ndarray,
+    *,
+    seed: int,
+    odometry_sigma: Sequence[float] = DEFAULT_ODOMETRY_SIGMA,
+    outlier_fraction: float = 0.3,
+    outlier_sigma: Sequence[float] = DEFAULT_OUTLIER_SIGMA,
+    loop_sigma: Sequence[float] = (0.0, 0.0),
+    decimals: int | None = 9,
+) -> NoisyGraph:
+    """Make a seeded noisy-Manhattan dataset from a graph's edges and a ground truth (module docstring).
+
+    Args:
+        graph: the source: its edges (odometry = consecutive ids, the rest loop closures), edge
+            order, information matrices and fixed vertices are kept; its measurements and poses
+            are not used.
+        ground_truth: `(N, P)` true poses in the graph's parametrization, e.g. the least-squares
+            optimum of the source or `GridWorld.ground_truth`.
+        seed: seed of `np.random.default_rng`; the same seed gives identical arrays.
+        odometry_sigma: odometry noise standard deviations, `(translation m, rotation rad)` or
+            one per tangent component (`(d,)`, order `[v, omega]`).
+        outlier_fraction: share of the loop closures to perturb, in [0, 1].
+        outlier_sigma: standard deviations of the outlier perturbations, same forms.
+        loop_sigma: noise of the inlier loop closures, same forms; zero keeps them exact.
+        decimals: round measurements and initial poses to this many decimals; None keeps full
+            precision.
+
+    Returns:
+        The `NoisyGraph`.
+
+    Raises:
+        EgncError: invalid arguments, a source without loop closures while outliers are wanted,
+            odometry that does not reach every pose, or outlier draws that keep failing the test
+            (a perturbation far too small for the information matrices).
+    """
+    dim, d = graph.dim, graph.tangent_dim
+    ground_truth = np.asarray(ground_truth, dtype=np.float64)
+    expected = (graph.num_poses, POSE_SIZE[dim])
+    if ground_truth.shape != expected:
+        raise EgncError(f"make_noisy_manhattan: ground_truth has shape {ground_truth.shape}, expected {expected}")
+    if not np.all(np.isfinite(ground_truth)):
+        raise EgncError("make_noisy_manhattan: ground_truth contains NaN or infinite values")
+    if not 0.0 <= outlier_fraction <= 1.0:
+        raise EgncError(f"make_noisy_manhattan: outlier_fraction must lie in [0, 1], got {outlier_fraction}")
+    sigma_odometry = _sigmas(odometry_sigma, dim, "odometry_sigma")
+    sigma_loop = _sigmas(loop_sigma, dim, "loop_sigma")
+    sigma_outlier = _sigmas(outlier_sigma, dim, "outlier_sigma")
+    is_odometry = graph.is_odometry
+    loops = np.flatnonzero(~is_odometry)
+    count = outlier_count(len(loops), outlier_fraction)
+    if count and not np.any(sigma_outlier > 0.0):
+        raise EgncError("make_noisy_manhattan: outlier_sigma must have a positive entry to make outliers")
+
+    rng = np.random.default_rng(seed)
+    is_outlier = np.zeros(graph.num_edges, dtype=bool)
+    is_outlier[np.sort(rng.choice(loops, size=count, replace=False))] = True
+    noise = rng.standard_normal((graph.num_edges, d))
+
+    group = group_of(dim)
+    T_world = to_matrices(dim, ground_truth)
+    T_i_j = group.between(T_world[graph.edges[:, 0]], T_world[graph.edges[:, 1]])
+    sigma = np.where(is_odometry[:, None], sigma_odometry, sigma_loop)
+    measurements = _rounded(from_matrices(dim, group.compose(T_i_j, group.exp(noise * sigma))), decimals)
+
+    # The outlier-free optimum, solved from the ground truth; the outliers' measurements do not enter it.
+    keep = ~is_outlier
+    outlier_free = PoseGraph(
+        dim, graph.vertex_ids, ground_truth, graph.edges[keep], measurements[keep], graph.information[keep], graph.fixed
+    )
+    solved = solve(outlier_free, "l2", linear_solver="scipy")
+    if not solved.converged:
+        raise EgncError(f"make_noisy_manhattan: the outlier-free least-squares solve failed: {solved.message}")
+    reference = solved.graph.poses
+    T_reference = to_matrices(dim, reference)
+    R_i_j = group.between(T_reference[graph.edges[:, 0]], T_reference[graph.edges[:, 1]])
+
+    pending = np.flatnonzero(is_outlier)
+    threshold = float(scipy.stats.chi2.ppf(ACCEPT_QUANTILE, d))
+    for _ in range(_MAX_ROUNDS):
+        if len(pending) == 0:
+            break
+        perturbation = rng.standard_normal((len(pending), d)) * sigma_outlier
+        candidates = _rounded(from_matrices(dim, group.compose(T_i_j[pending], group.exp(perturbation))), decimals)
+        Z_inverse = group.inverse(to_matrices(dim, candidates))
+        information = graph.information[pending]
+        accept = np.ones(len(pending), dtype=bool)
+        for T_pairs in (T_i_j[pending], R_i_j[pending]):  # at the ground truth, at the optimum
+            e = group.log(group.compose(Z_inverse, T_pairs))
+            accept &= np.einsum("ki,kij,kj->k", e, information, e) > threshold
+        measurements[pending[accept]] = candidates[accept]
+        pending = pending[~accept]
+    if len(pending):
+        raise EgncError(
+            f"make_noisy_manhattan: {len(pending)} outlier draws still pass as inliers after {_MAX_ROUNDS} "
+            f"rounds: outlier_sigma {sigma_outlier.tolist()} is too small for the information matrices"
+        )
+
+    # The initial guess: the ground-truth first pose, then the noisy odometry composed from it.
+    known = np.zeros(graph.num_poses, dtype=bool)
+    known[0] = True
+    poses = initialize_poses(dim, graph.edges[is_odometry], measurements[is_odometry], poses=ground_truth, known=known)
+    noisy = PoseGraph(
+        dim=dim,
+        vertex_ids=graph.vertex_ids,
+        poses=_rounded(poses, decimals),
+        edges=graph.edges,
+        measurements=measurements,
+        information=graph.information,
+        fixed=graph.fixed,
+        edge_lines=graph.edge_lines,
+    )
+    ground_truth = ground_truth.copy()
+    for array in (is_outlier, ground_truth, reference):
+        array.setflags(write=False)
+    return NoisyGraph(graph=noisy, is_outlier=is_outlier, ground_truth=ground_truth, reference=reference)
+
+
+def _sigmas(value: Sequence[float], dim: int, name: str) -> np.ndarray:
+    """Expand `(translation, rotation)` or `(d,)` standard deviations to `(d,)`."""
+    d = TANGENT_SIZE[dim]
+    sigma = np.asarray(value, dtype=np.float64)
+    if sigma.shape == (2,):
+        sigma = np.concatenate((np.full(dim, sigma[0]), np.full(d - dim, sigma[1])))
+    if sigma.shape != (d,):
+        raise EgncError(f"make_noisy_manhattan: {name} must have 2 or {d} entries, got shape {sigma.shape}")
+    if not np.all(np.isfinite(sigma) & (sigma >= 0.0)):
+        raise EgncError(f"make_noisy_manhattan: {name} must be finite and non-negative, got {sigma.tolist()}")
+    return sigma
+
+
+def _rounded(values: np.ndarray, decimals: int | None) -> np.ndarray:
+    """`values` rounded to `decimals` places (unchanged when None), with -0.0 turned into 0.0."""
+    if decimals is None:
+        return np.array(values, dtype=np.float64)
+    return np.round(values, decimals) + 0.0
