@@ -1,0 +1,495 @@
+"""Figures of a solve and of the SIG kernel, drawn with matplotlib (the `plot` extra).
+
+- `plot_trajectory`: the optimized trajectory (2D or 3D), optionally the initial guess and a
+  reference, with accepted and rejected loop closures in distinct styles.
+- `plot_mu_stages`: per-stage statistics of the kernel parameter `mu` and a histogram of the
+  final per-factor `mu`.
+- `plot_kernel`: the SIG kernel `rho(r; mu)` and its second derivative for several `mu`.
+- `plot_mu_star`: the convexity boundary `mu*(r)` and its asymptote 1/2.
+- `save_figure`: write a figure atomically (the file is complete or not there).
+
+matplotlib is imported inside the functions, so `import egnc.plot` works without it; calling a
+plot function without it raises `EgncError` with the install command. The figures are plain
+`matplotlib.figure.Figure` objects, not pyplot figures: they need no GUI backend and are freed
+like any object. To draw into a pyplot window instead, pass `ax` (or `axes`) made by pyplot.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+
+from egnc.api import Result
+from egnc.errors import EgncError
+from egnc.graph import PoseGraph
+from egnc.io.atomic import atomic_binary_file
+from egnc.kernels import make_kernel
+from egnc.mu_star import mu_star
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from mpl_toolkits.mplot3d import Axes3D
+
+__all__ = [
+    "plot_kernel",
+    "plot_mu_stages",
+    "plot_mu_star",
+    "plot_trajectory",
+    "require_matplotlib",
+    "save_figure",
+]
+
+INSTALL_HINT = "pip install 'egnc[plot]'"
+"""How to get matplotlib; quoted in the error raised without it."""
+
+# One palette for every figure, so a colour means the same thing everywhere.
+RESULT_COLOR = "#1f3b73"
+INITIAL_COLOR = "0.7"
+REFERENCE_COLOR = "#2ca02c"
+ACCEPTED_COLOR = "#8fa8c8"
+REJECTED_COLOR = "#d62728"
+
+
+def require_matplotlib() -> None:
+    """Check that matplotlib can be imported.
+
+    Raises:
+        EgncError: matplotlib is not installed (the message says `pip install 'egnc[plot]'`).
+    """
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise EgncError(f"plotting needs matplotlib, which is not installed: {INSTALL_HINT}") from None
+
+
+def plot_trajectory(
+    result_or_graph: Result | PoseGraph,
+    *,
+    initial: PoseGraph | np.ndarray | None = None,
+    reference: PoseGraph | np.ndarray | None = None,
+    inliers: np.ndarray | None = None,
+    known_inliers: np.ndarray | None = None,
+    ax: Axes | None = None,
+) -> Figure:
+    """Draw a trajectory with its loop closures: x-y for a 2D graph, x-y-z (3D axes) for a 3D one.
+
+    The trajectory is the line through the poses in id order. Loop closures (edges that are not
+    known inliers, odometry by default) are drawn between their poses on that trajectory:
+    accepted ones as thin grey-blue lines, rejected ones as red dashed lines.
+
+    Args:
+        result_or_graph: a `Result` (its optimized graph, `inliers` and `known_inliers` are used,
+            and its method and rejection count become the title) or a `PoseGraph`.
+        initial: the trajectory before optimization, drawn in light grey: a `PoseGraph` or its
+            `(N, P)` poses (P = 3 in 2D, 7 in 3D), same rows as the graph.
+        reference: a reference trajectory (e.g. ground truth), drawn in green; same forms.
+        inliers: `(E,)` bool, false for rejected edges; defaults to the result's (a bare graph has
+            no rejected edges).
+        known_inliers: `(E,)` bool, edges that are not drawn as loop closures; defaults to the
+            result's, or to the graph's odometry.
+        ax: draw here instead of in a new figure; must be a 3D axes (`projection="3d"`) for a
+            3D graph and a 2D one for a 2D graph.
+
+    Returns:
+        The `Figure` holding the axes.
+
+    Raises:
+        EgncError: matplotlib is missing, or an argument has the wrong shape or axes type.
+    """
+    require_matplotlib()
+    graph = result_or_graph if isinstance(result_or_graph, PoseGraph) else result_or_graph.graph
+    result = None if isinstance(result_or_graph, PoseGraph) else result_or_graph
+    n_edges = graph.num_edges
+    if inliers is None:
+        inliers = result.inliers if result is not None else np.ones(n_edges, dtype=bool)
+    if known_inliers is None:
+        known_inliers = result.known_inliers if result is not None else graph.is_odometry
+    inliers = _edge_mask("inliers", inliers, n_edges)
+    known_inliers = _edge_mask("known_inliers", known_inliers, n_edges)
+    candidates = ~known_inliers
+    # Accepted odometry would only retrace the trajectory line; rejected edges are always shown.
+    accepted = candidates & inliers & graph.is_loop_closure
+    rejected = candidates & ~inliers
+
+    own_figure = ax is None
+    figure, ax = _single_axes(ax, three_d=graph.dim == 3, figsize=(7.0, 5.6) if graph.dim == 3 else (6.4, 6.0))
+    if (ax.name == "3d") != (graph.dim == 3):
+        raise EgncError(f"a {graph.dim}D graph needs a {'3D' if graph.dim == 3 else '2D'} axes")
+    position = _positions(graph, graph.poses, "result")
+    segments = np.stack([position[graph.edges[:, 0]], position[graph.edges[:, 1]]], axis=1)
+
+    _add_segments(
+        ax,
+        segments[accepted],
+        color=ACCEPTED_COLOR,
+        linewidth=0.5,
+        zorder=1,
+        label=f"accepted loop closures ({int(accepted.sum())})" if result is not None else "loop closures",
+    )
+    if initial is not None:
+        _draw_path(
+            ax,
+            _positions(graph, initial, "initial"),
+            color=INITIAL_COLOR,
+            linewidth=0.8,
+            zorder=2,
+            label="initial guess",
+        )
+    if reference is not None:
+        _draw_path(
+            ax,
+            _positions(graph, reference, "reference"),
+            color=REFERENCE_COLOR,
+            linewidth=1.0,
+            linestyle=":",
+            zorder=3,
+            label="reference",
+        )
+    _draw_path(
+        ax,
+        position,
+        color=RESULT_COLOR,
+        linewidth=1.0,
+        zorder=4,
+        label="result" if result is not None else "trajectory",
+    )
+    if rejected.any():
+        _add_segments(
+            ax,
+            segments[rejected],
+            color=REJECTED_COLOR,
+            linewidth=0.7,
+            linestyle=(0, (4, 2)),
+            zorder=5,
+            label=f"rejected loop closures ({int(rejected.sum())})",
+        )
+
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    if graph.dim == 3:
+        ax3d = cast("Axes3D", ax)
+        ax3d.set_zlabel("z [m]")
+        ax3d.set_box_aspect(None, zoom=0.9)  # room for the z label inside the figure
+        ax3d.set_aspect("equal")  # after the box: it widens the limits to fit the box
+    else:
+        ax.set_aspect("equal", adjustable="datalim")
+    if result is not None and not ax.get_title():
+        ax.set_title(f"{result.method}: rejected {int(rejected.sum())} of {int(candidates.sum())} loop closures")
+    if own_figure:  # below the axes, off the trajectory
+        figure.legend(loc="outside lower center", ncol=2, fontsize="small", frameon=False)
+    else:  # an explicit corner: "best" scans every segment, which is slow on large graphs
+        ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
+    return figure
+
+
+def plot_mu_stages(result: Result, *, axes: Sequence[Axes] | None = None) -> Figure:
+    """Draw the kernel parameter of each stage (min, mean, max) and a histogram of the final `mu`.
+
+    Left panel: per stage, the min, mean and max of the loop closures' `mu`; stages without a
+    kernel parameter (least squares, e.g. the final refinement) are shaded. `mu` is in [0, 1] for
+    the SIG methods (`egnc`, `risam`); GNC-GM/TLS use Yang et al.'s `mu`, shown on a log scale.
+    Right panel: histogram of `result.mu` over the loop closures, split into accepted and rejected.
+
+    Args:
+        result: a solve's `Result`.
+        axes: two axes to draw into (stages, histogram) instead of a new figure.
+
+    Returns:
+        The `Figure` holding the axes.
+
+    Raises:
+        EgncError: matplotlib is missing, or `axes` is not two axes.
+    """
+    require_matplotlib()
+    from matplotlib.ticker import MaxNLocator
+
+    figure, (ax_stages, ax_hist) = _two_axes(axes, figsize=(9.0, 3.6))
+    stages = result.stages
+    number = np.arange(1, len(stages) + 1)
+    low = np.array([stage.mu_min for stage in stages], dtype=float)
+    mean = np.array([stage.mu_mean for stage in stages], dtype=float)
+    high = np.array([stage.mu_max for stage in stages], dtype=float)
+    has_mu = np.isfinite(mean)
+    values = np.concatenate([low[has_mu], mean[has_mu], high[has_mu]])
+    log_scale = bool(values.size and (values.max() > 1.0) and np.all(values[np.isfinite(values)] > 0.0))
+
+    for k in np.flatnonzero(~has_mu):
+        ax_stages.axvspan(number[k] - 0.4, number[k] + 0.4, color="0.92", zorder=0)
+        ax_stages.text(
+            number[k],
+            0.5,
+            "least squares",
+            rotation=90,
+            ha="center",
+            va="center",
+            transform=ax_stages.get_xaxis_transform(),
+            fontsize="small",
+            color="0.4",
+        )
+    if has_mu.any():
+        ax_stages.fill_between(
+            number, low, high, where=has_mu, color=ACCEPTED_COLOR, alpha=0.35, linewidth=0, label="min to max"
+        )
+        ax_stages.plot(number, high, "^", color=RESULT_COLOR, markersize=4, label="max")
+        ax_stages.plot(number, mean, "o-", color=RESULT_COLOR, markersize=4, linewidth=1.0, label="mean")
+        ax_stages.plot(number, low, "v", color=RESULT_COLOR, markersize=4, label="min")
+        ax_stages.legend(loc="best", fontsize="small")
+    else:
+        ax_stages.text(
+            0.5,
+            0.5,
+            f"method {result.method!r} has no kernel parameter mu",
+            ha="center",
+            va="center",
+            transform=ax_stages.transAxes,
+        )
+    if log_scale:
+        ax_stages.set_yscale("log")
+    else:
+        ax_stages.set_ylim(-0.05, 1.05)
+    ax_stages.xaxis.set_major_locator(MaxNLocator(nbins=12, integer=True))
+    ax_stages.set_xlim(0.4, len(stages) + 0.6)
+    ax_stages.set_xlabel("stage")
+    ax_stages.set_ylabel(r"$\mu$ of the loop closures")
+    ax_stages.set_title(rf"{result.method}: $\mu$ per stage")
+
+    robust = ~result.known_inliers
+    finite = robust & np.isfinite(result.mu)
+    groups = [result.mu[finite & result.inliers], result.mu[finite & ~result.inliers]]
+    if finite.any():
+        in_unit = np.all((result.mu[finite] >= 0.0) & (result.mu[finite] <= 1.0))
+        bins = np.linspace(0.0, 1.0, 21).tolist() if in_unit else 20
+        ax_hist.hist(
+            groups,
+            bins=bins,
+            stacked=True,
+            color=[ACCEPTED_COLOR, REJECTED_COLOR],
+            label=[f"accepted ({groups[0].size})", f"rejected ({groups[1].size})"],
+        )
+        ax_hist.legend(loc="upper left", fontsize="small")
+    else:
+        ax_hist.text(
+            0.5, 0.5, "no final mu (no graduated kernel)", ha="center", va="center", transform=ax_hist.transAxes
+        )
+    ax_hist.set_xlabel(r"final $\mu$")
+    ax_hist.set_ylabel("loop closures")
+    ax_hist.set_title(r"final $\mu$ per loop closure")
+    return figure
+
+
+def plot_kernel(
+    c: float = 3.0,
+    mus: Sequence[float] = (0.0, 0.25, 0.5, 0.75, 1.0),
+    r_max: float = 10.0,
+    *,
+    axes: Sequence[Axes] | None = None,
+) -> Figure:
+    """Draw the SIG kernel `rho(r; mu)` and `d2rho/dr2` over `r` for several `mu` (two panels).
+
+    The dotted vertical line is `r = c / sqrt(3)`: below it the kernel is convex for every `mu`;
+    beyond it `d2rho` turns negative once `mu` exceeds `mu*(r)` (see `plot_mu_star`).
+
+    Args:
+        c: SIG shape parameter, > 0 (riSAM and egnc use 3).
+        mus: the `mu` values to draw, each in [0, 1].
+        r_max: largest whitened residual norm `r` drawn, > 0.
+        axes: two axes to draw into (rho, d2rho) instead of a new figure.
+
+    Returns:
+        The `Figure` holding the axes.
+
+    Raises:
+        EgncError: matplotlib is missing, or a parameter is out of range.
+    """
+    require_matplotlib()
+    from matplotlib import colormaps
+
+    kernel = make_kernel("sig", c=c)
+    c = kernel.params["c"]
+    r_max = _positive_finite("r_max", r_max)
+    mu_values = np.asarray(mus, dtype=float).ravel()
+    if mu_values.size == 0 or not np.all((mu_values >= 0.0) & (mu_values <= 1.0)):
+        raise EgncError(f"mus must be a non-empty list of values in [0, 1], got {mu_values.tolist()}")
+    figure, (ax_rho, ax_d2) = _two_axes(axes, figsize=(9.0, 3.6))
+    r = np.linspace(0.0, r_max, 600)
+    colors = colormaps["viridis"](np.linspace(0.0, 0.9, mu_values.size))
+    for mu, color in zip(mu_values, colors):
+        ax_rho.plot(r, kernel.rho(r, mu), color=color, linewidth=1.3, label=rf"$\mu$ = {mu:g}")
+        ax_d2.plot(r, kernel.d2rho(r, mu), color=color, linewidth=1.3, label=rf"$\mu$ = {mu:g}")
+    boundary = c / math.sqrt(3.0)
+    # The label sits where the curves are not: low in the rho panel, high in the d2rho panel.
+    for ax, height, align in ((ax_rho, 0.03, "bottom"), (ax_d2, 0.97, "top")):
+        ax.axvline(boundary, color="0.3", linestyle=":", linewidth=1.0)
+        ax.text(
+            boundary,
+            height,
+            rf" $r = c/\sqrt{{3}}$ = {boundary:.3g}",
+            transform=ax.get_xaxis_transform(),
+            ha="left",
+            va=align,
+            fontsize="small",
+            color="0.3",
+        )
+        ax.set_xlim(0.0, r_max)
+        ax.set_xlabel(r"$r$ (whitened residual norm)")
+    ax_d2.axhline(0.0, color="0.3", linewidth=0.8)
+    ax_rho.set_ylabel(r"$\rho(r; \mu)$")
+    ax_d2.set_ylabel(r"$d^2\rho / dr^2$")
+    ax_rho.set_title(rf"SIG kernel $\rho(r; \mu) = \frac{{1}}{{2}} \frac{{c^2 r^2}}{{c^2 + r^{{2\mu}}}}$, $c$ = {c:g}")
+    ax_d2.set_title(r"second derivative ($< 0$: non-convex at $r$)")
+    ax_rho.legend(loc="upper left", fontsize="small")
+    return figure
+
+
+def plot_mu_star(c: float = 3.0, r_max: float = 100.0, *, ax: Axes | None = None) -> Figure:
+    """Draw the convexity boundary `mu*(r)` of the SIG kernel and its asymptote `mu = 1/2`.
+
+    Below the curve (`mu <= mu*(r)`) the kernel is convex at `r`: `mu* = 1` up to
+    `r = c / sqrt(3)`, then it falls towards 1/2 as `r` grows. `r` is on a log scale from
+    `c / 30` to `r_max`, so the corner and the tail are both visible.
+
+    Args:
+        c: SIG shape parameter, > 0.
+        r_max: largest whitened residual norm `r` drawn, > `c / 30`.
+        ax: draw here instead of in a new figure.
+
+    Returns:
+        The `Figure` holding the axes.
+
+    Raises:
+        EgncError: matplotlib is missing, or a parameter is out of range.
+    """
+    require_matplotlib()
+    c = _positive_finite("c", c)
+    r_min = c / 30.0
+    r_max = _positive_finite("r_max", r_max)
+    if r_max <= r_min:
+        raise EgncError(f"r_max must exceed c / 30 = {r_min:g}, got {r_max!r}")
+    figure, ax = _single_axes(ax, three_d=False, figsize=(6.0, 3.8))
+    r = np.geomspace(r_min, r_max, 1000)
+    boundary = mu_star(r, c=c)
+    ax.fill_between(
+        r, 0.0, boundary, color=ACCEPTED_COLOR, alpha=0.3, linewidth=0, label=r"convex at $r$ ($\mu \leq \mu^*$)"
+    )
+    ax.plot(r, boundary, color=RESULT_COLOR, linewidth=1.5, label=r"$\mu^*(r)$")
+    ax.axhline(0.5, color=REJECTED_COLOR, linestyle="--", linewidth=1.0, label=r"asymptote $\mu = 1/2$")
+    corner = c / math.sqrt(3.0)
+    ax.axvline(corner, color="0.3", linestyle=":", linewidth=1.0)
+    ax.text(corner, 0.25, rf" $r = c/\sqrt{{3}}$ = {corner:.3g}", fontsize="small", color="0.3")
+    ax.set_xscale("log")
+    ax.set_xlim(r_min, r_max)
+    ax.set_ylim(0.0, 1.05)
+    ax.set_xlabel(r"$r$ (whitened residual norm, log scale)")
+    ax.set_ylabel(r"$\mu$")
+    ax.set_title(rf"SIG convexity boundary $\mu^*(r)$, $c$ = {c:g}")
+    ax.legend(loc="lower left", fontsize="small")
+    return figure
+
+
+def save_figure(figure: Figure, path: str | Path, *, dpi: float = 100) -> Path:
+    """Write a figure to `path` atomically; the format comes from the suffix (PNG without one).
+
+    Args:
+        figure: the figure to write (e.g. from `plot_trajectory`).
+        path: output file, e.g. `"trajectory.png"` (any format matplotlib writes: png, pdf, svg...).
+        dpi: resolution in dots per inch for raster formats.
+
+    Returns:
+        `path` as a `Path`.
+
+    Raises:
+        EgncError: matplotlib is missing, the format is unknown, or the file cannot be written.
+    """
+    require_matplotlib()
+    path = Path(path)
+    file_format = path.suffix[1:].lower() or "png"
+    supported = figure.canvas.get_supported_filetypes()
+    if file_format not in supported:
+        raise EgncError(f"{path}: cannot write figures as {file_format!r}; use one of {', '.join(sorted(supported))}")
+    # Line art compresses much better with zlib's best effort (Pillow's `optimize`).
+    options: dict[str, Any] = {"pil_kwargs": {"optimize": True}} if file_format == "png" else {}
+    with atomic_binary_file(path) as out:
+        figure.savefig(out, format=file_format, dpi=dpi, **options)
+    return path
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _single_axes(ax: Axes | None, *, three_d: bool, figsize: tuple[float, float] = (6.4, 6.0)) -> tuple[Figure, Axes]:
+    """`ax` and its figure, or a new figure with one (3D if asked) axes."""
+    if ax is not None:
+        return _root_figure(ax), ax
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=figsize, layout="constrained")
+    return figure, figure.add_subplot(projection="3d" if three_d else None)
+
+
+def _two_axes(axes: Sequence[Axes] | None, *, figsize: tuple[float, float]) -> tuple[Figure, Sequence[Axes]]:
+    """The two given axes and their figure, or a new figure with two side by side."""
+    if axes is not None:
+        if len(axes) != 2:
+            raise EgncError(f"axes must be two matplotlib axes, got {len(axes)}")
+        return _root_figure(axes[0]), axes
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=figsize, layout="constrained")
+    return figure, figure.subplots(1, 2)
+
+
+def _root_figure(ax: Axes) -> Figure:
+    """The top-level figure of `ax`, also when it sits in a subfigure (`SubFigure.figure` is the root)."""
+    return cast("Figure", ax.figure.figure)
+
+
+def _positions(graph: PoseGraph, poses: PoseGraph | np.ndarray, name: str) -> np.ndarray:
+    """`(N, dim)` positions of `poses` (a graph or an `(N, P)` array) matching `graph`'s rows."""
+    if isinstance(poses, PoseGraph):
+        poses = poses.poses
+    poses = np.asarray(poses, dtype=float)
+    expected = (graph.num_poses, graph.poses.shape[1])
+    if poses.shape != expected:
+        raise EgncError(f"{name} poses have shape {poses.shape}, expected {expected} like the graph")
+    return poses[:, : graph.dim]
+
+
+def _edge_mask(name: str, mask: np.ndarray, n_edges: int) -> np.ndarray:
+    """Validate an `(E,)` bool edge mask."""
+    mask = np.asarray(mask)
+    if mask.shape != (n_edges,) or mask.dtype != bool:
+        raise EgncError(f"{name} must be an ({n_edges},) bool array, got {mask.dtype} of shape {mask.shape}")
+    return mask
+
+
+def _positive_finite(name: str, value: float) -> float:
+    """Validate a positive, finite scalar."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise EgncError(f"{name} must be a number, got {value!r}") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise EgncError(f"{name} must be positive and finite, got {value!r}")
+    return value
+
+
+def _draw_path(ax: Axes, position: np.ndarray, **style) -> None:
+    """One polyline through `(N, 2|3)` positions."""
+    ax.plot(*position.T, **style)
+
+
+def _add_segments(ax: Axes, segments: np.ndarray, **style) -> None:
+    """One line collection of `(K, 2, 2|3)` segments (one artist however many edges)."""
+    if segments.shape[-1] == 3:
+        from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+        cast("Axes3D", ax).add_collection3d(Line3DCollection(list(segments), **style))
+    else:
+        from matplotlib.collections import LineCollection
+
+        ax.add_collection(LineCollection(list(segments), **style))
