@@ -19,12 +19,14 @@ from egnc.errors import EgncError
 from egnc.io import read_g2o, write_g2o
 from egnc.io.atomic import atomic_text_file
 from egnc.least_squares import SolverOptions
+from egnc.plot import plot_trajectory, require_matplotlib, save_figure
 
 EXAMPLES = """examples:
   egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o
   egnc-solve graph.g2o --method risam --report report.json
   egnc-solve graph.g2o --drop-outliers -o inliers_only.g2o
   egnc-solve graph.g2o --method l2 --linear-solver scipy
+  egnc-solve graph.g2o --plot trajectory.png
 """
 
 
@@ -65,6 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--skip-unknown", action="store_true", help="ignore lines with unknown g2o tags")
     parser.add_argument("--report", type=Path, help="write a JSON report here")
+    parser.add_argument(
+        "--plot",
+        type=Path,
+        metavar="PNG",
+        help="draw the initial guess, the result and the accepted/rejected loop closures here (needs egnc[plot])",
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     parser.add_argument("--version", action="version", version=f"egnc {__version__}")
     return parser
@@ -161,6 +169,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     written: list[Path] = []
     try:
+        if args.plot is not None:  # fail before a long solve, not after it
+            require_matplotlib()
         graph = read_g2o(args.input, skip_unknown=args.skip_unknown)
         result = solve(
             graph,
@@ -176,6 +186,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.report is not None:
             with atomic_text_file(args.report) as out:
                 out.write(json.dumps(report_dict(result), indent=2) + "\n")
+            written.append(args.report)
+        if args.plot is not None:
+            save_figure(plot_trajectory(result, initial=graph), args.plot)
     except EgncError as error:
         # A failed run leaves no output behind, not even a graph written before the report failed.
         for path in written:
