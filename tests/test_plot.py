@@ -1,0 +1,245 @@
+"""egnc.plot: the figures' artists, atomic saving, `egnc-solve --plot`, and life without matplotlib."""
+
+from __future__ import annotations
+
+import importlib
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import egnc
+from egnc import plot
+from egnc.errors import EgncError
+from egnc.mu_star import mu_star
+
+DATASETS = Path(__file__).parents[1] / "datasets"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+INSTALL_HINT = "pip install 'egnc[plot]'"
+
+
+@pytest.fixture(scope="module")
+def mpl():
+    """matplotlib on the Agg backend (the figures need no GUI); skips without it."""
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    return matplotlib
+
+
+@pytest.fixture(scope="module")
+def solved2d() -> tuple[egnc.PoseGraph, egnc.Result]:
+    """The shipped 2D grid with 30 % false loops and its egnc solve (about 0.1 s)."""
+    graph = egnc.read_g2o(DATASETS / "grid2d_outliers.g2o")
+    return graph, egnc.solve(graph)
+
+
+@pytest.fixture(scope="module")
+def solved3d() -> tuple[egnc.PoseGraph, egnc.Result]:
+    """The shipped 3D grid with 30 % false loops and its egnc solve."""
+    graph = egnc.read_g2o(DATASETS / "grid3d_outliers.g2o")
+    return graph, egnc.solve(graph)
+
+
+def collection(ax, label_start: str):
+    """The one line collection whose legend label starts with `label_start`."""
+    (found,) = [c for c in ax.collections if c.get_label().startswith(label_start)]
+    return found
+
+
+def line(ax, label: str):
+    """The one line with this legend label."""
+    (found,) = [item for item in ax.lines if item.get_label() == label]
+    return found
+
+
+# ----------------------------------------------------------------------------- trajectory
+
+
+def test_trajectory_2d_draws_result_initial_and_each_loop_once(mpl, solved2d):
+    from matplotlib.figure import Figure
+
+    graph, result = solved2d
+    figure = plot.plot_trajectory(result, initial=graph)
+    assert isinstance(figure, Figure)
+    (ax,) = figure.axes
+    assert ax.name != "3d"
+    rejected = collection(ax, "rejected")
+    accepted = collection(ax, "accepted")
+    assert len(rejected.get_segments()) == len(result.rejected_edges) > 0
+    assert len(accepted.get_segments()) == int((result.inliers & ~result.known_inliers).sum())
+    # Each rejected segment joins the optimized positions of its edge's poses.
+    first = result.rejected_edges[0]
+    i, j = graph.edges[first]
+    np.testing.assert_allclose(rejected.get_segments()[0], result.graph.poses[[i, j], :2])
+    np.testing.assert_allclose(line(ax, "result").get_xydata(), result.graph.poses[:, :2])
+    np.testing.assert_allclose(line(ax, "initial guess").get_xydata(), graph.poses[:, :2])
+    legend_labels = [text.get_text() for text in figure.legends[0].get_texts()]
+    assert legend_labels[-1] == f"rejected loop closures ({len(result.rejected_edges)})"
+    assert str(len(result.rejected_edges)) in ax.get_title()
+
+
+def test_trajectory_3d_uses_3d_axes(mpl, solved3d):
+    graph, result = solved3d
+    figure = plot.plot_trajectory(result, initial=graph.poses)
+    (ax,) = figure.axes
+    assert ax.name == "3d"
+    figure.draw_without_rendering()  # 3D collections project their segments at draw time
+    assert len(collection(ax, "rejected").get_segments()) == len(result.rejected_edges) > 0
+    x, y, z = line(ax, "result").get_data_3d()
+    np.testing.assert_allclose(np.stack([x, y, z], axis=1), result.graph.poses[:, :3])
+
+
+def test_trajectory_of_a_bare_graph_with_reference_into_given_axes(mpl, solved2d):
+    from matplotlib.figure import Figure
+
+    graph, result = solved2d
+    figure = Figure()
+    ax = figure.add_subplot()
+    assert plot.plot_trajectory(graph, reference=result.graph, ax=ax) is figure
+    assert [c.get_label() for c in ax.collections] == ["loop closures"]  # nothing is rejected
+    assert len(ax.collections[0].get_segments()) == int(graph.is_loop_closure.sum())
+    assert {item.get_label() for item in ax.lines} == {"trajectory", "reference"}
+    assert ax.get_legend() is not None
+
+
+def test_trajectory_rejects_bad_arguments(mpl, solved2d, solved3d):
+    from matplotlib.figure import Figure
+
+    graph, result = solved2d
+    with pytest.raises(EgncError, match="initial poses have shape"):
+        plot.plot_trajectory(result, initial=graph.poses[:-1])
+    with pytest.raises(EgncError, match="inliers must be"):
+        plot.plot_trajectory(graph, inliers=np.ones(3, dtype=bool))
+    with pytest.raises(EgncError, match="3D axes"):
+        plot.plot_trajectory(solved3d[1], ax=Figure().add_subplot())
+
+
+# ----------------------------------------------------------------------------- mu, kernel, mu*
+
+
+def test_mu_stages_plots_each_stage_and_every_loop_closure(mpl, solved2d):
+    _, result = solved2d
+    figure = plot.plot_mu_stages(result)
+    ax_stages, ax_hist = figure.axes
+    mean = line(ax_stages, "mean").get_ydata()
+    np.testing.assert_array_equal(mean, [stage.mu_mean for stage in result.stages])
+    assert math.isnan(mean[-1])  # the least-squares refinement has no mu
+    heights = sum(patch.get_height() for patch in ax_hist.patches)
+    assert heights == int((~result.known_inliers).sum())
+
+
+def test_mu_stages_of_a_method_without_mu(mpl, solved2d):
+    graph, _ = solved2d
+    figure = plot.plot_mu_stages(egnc.solve(graph, "l2"))
+    texts = [text.get_text() for ax in figure.axes for text in ax.texts]
+    assert any("no kernel parameter" in text for text in texts)
+
+
+def test_kernel_draws_rho_and_d2rho_per_mu(mpl):
+    mus = (0.0, 0.5, 1.0)
+    figure = plot.plot_kernel(c=3.0, mus=mus, r_max=8.0)
+    ax_rho, ax_d2 = figure.axes
+    kernel = egnc.kernels.make_kernel("sig", c=3.0)
+    for ax, function in ((ax_rho, kernel.rho), (ax_d2, kernel.d2rho)):
+        curves = [item for item in ax.lines if item.get_label().startswith("$\\mu$")]
+        assert len(curves) == len(mus)
+        for curve, mu in zip(curves, mus):
+            r, value = curve.get_xydata().T
+            np.testing.assert_allclose(value, function(r, mu))
+        boundaries = [item.get_xdata()[0] for item in ax.lines if item.get_linestyle() == ":"]
+        assert boundaries == [pytest.approx(3.0 / math.sqrt(3.0))]
+    with pytest.raises(EgncError, match="mus"):
+        plot.plot_kernel(mus=(0.5, 1.5))
+
+
+def test_mu_star_curve_and_asymptote(mpl):
+    figure = plot.plot_mu_star(c=3.0, r_max=100.0)
+    (ax,) = figure.axes
+    r, mu = line(ax, "$\\mu^*(r)$").get_xydata().T
+    np.testing.assert_allclose(mu, mu_star(r, c=3.0))
+    assert mu.min() >= 0.5 and mu.max() == 1.0
+    assert line(ax, "asymptote $\\mu = 1/2$").get_ydata()[0] == 0.5
+    with pytest.raises(EgncError, match="r_max"):
+        plot.plot_mu_star(r_max=-1.0)
+
+
+# ----------------------------------------------------------------------------- saving, CLI
+
+
+def test_save_figure_writes_png_atomically(mpl, tmp_path):
+    path = plot.save_figure(plot.plot_mu_star(r_max=10.0), tmp_path / "mu_star.png")
+    assert path.read_bytes()[:8] == PNG_SIGNATURE
+    with pytest.raises(EgncError, match="cannot write figures as 'xyz'"):
+        plot.save_figure(plot.plot_mu_star(r_max=10.0), tmp_path / "figure.xyz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mu_star.png"]  # no temporary left
+
+
+def test_cli_plot_writes_png(mpl, tmp_path):
+    out = tmp_path / "trajectory.png"
+    run = subprocess.run(
+        [sys.executable, "-m", "egnc.cli", str(DATASETS / "grid2d_outliers.g2o"), "--plot", str(out), "-q"],
+        capture_output=True,
+        check=False,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, "MPLBACKEND": "Agg"},
+    )
+    assert run.returncode == 0, run.stderr
+    assert out.read_bytes()[:8] == PNG_SIGNATURE
+
+
+# ----------------------------------------------------------------------------- no matplotlib
+
+
+def test_plot_functions_without_matplotlib_raise_install_hint(monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # `import matplotlib` now fails
+    monkeypatch.delitem(sys.modules, "egnc.plot")
+    monkeypatch.delattr(egnc, "plot")  # both are restored after the test
+    fresh = importlib.import_module("egnc.plot")  # importing the module still works
+    graph = egnc.read_g2o(DATASETS / "grid2d.g2o")
+    calls = [
+        lambda: fresh.plot_trajectory(graph),
+        lambda: fresh.plot_kernel(),
+        lambda: fresh.plot_mu_star(),
+        lambda: fresh.save_figure(None, "x.png"),
+    ]
+    for call in calls:
+        with pytest.raises(EgncError, match=r"pip install 'egnc\[plot\]'"):
+            call()
+
+
+def test_cli_plot_without_matplotlib_fails_in_one_line_before_solving(tmp_path):
+    # matplotlib is blocked and `solve` is replaced by a tripwire: the error must come first.
+    script = textwrap.dedent(
+        """
+        import sys
+        sys.modules["matplotlib"] = None
+        import egnc.cli
+
+        def tripwire(*args, **kwargs):
+            raise SystemExit("solve was called")
+
+        egnc.cli.solve = tripwire
+        sys.exit(egnc.cli.main(sys.argv[1:]))
+        """
+    )
+    out = tmp_path / "solved.g2o"
+    run = subprocess.run(
+        [sys.executable, "-c", script, str(DATASETS / "grid2d.g2o"), "-o", str(out), "--plot", str(tmp_path / "t.png")],
+        capture_output=True,
+        check=False,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+    )
+    assert run.returncode == 1
+    assert run.stdout == ""
+    assert run.stderr.count("\n") == 1 and run.stderr.startswith("egnc-solve: error: ")
+    assert INSTALL_HINT in run.stderr
+    assert list(tmp_path.iterdir()) == []
