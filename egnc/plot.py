@@ -381,6 +381,7 @@ def plot_mu_star(c: float = 3.0, r_max: float = 100.0, *, ax: Axes | None = None
     corner = c / math.sqrt(3.0)
     ax.axvline(corner, color="0.3", linestyle=":", linewidth=1.0)
     ax.text(corner, 0.25, rf" $r = c/\sqrt{{3}}$ = {corner:.3g}", fontsize="small", color="0.3")
+    ax.text(0.97, 0.75, r"non-convex at $r$ ($\mu > \mu^*$)", transform=ax.transAxes, ha="right", color="0.3")
     ax.set_xscale("log")
     ax.set_xlim(r_min, r_max)
     ax.set_ylim(0.0, 1.05)
