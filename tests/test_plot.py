@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import math
 import os
 import subprocess
@@ -192,6 +193,19 @@ def test_cli_plot_writes_png(mpl, tmp_path):
     )
     assert run.returncode == 0, run.stderr
     assert out.read_bytes()[:8] == PNG_SIGNATURE
+
+
+def test_docs_figures_regenerate_small(mpl, tmp_path):
+    pytest.importorskip("PIL")  # matplotlib's own dependency
+    spec = importlib.util.spec_from_file_location("make_figures", DATASETS.parent / "docs" / "make_figures.py")
+    make_figures = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make_figures)
+    assert make_figures.main(["--out", str(tmp_path)]) == 0
+    names = {"trajectory_grid2d.png", "kernel.png", "mu_star.png"}
+    assert {path.name for path in tmp_path.iterdir()} == names
+    for name in names:
+        content = (tmp_path / name).read_bytes()
+        assert content[:8] == PNG_SIGNATURE and len(content) < 200_000, name
 
 
 # ----------------------------------------------------------------------------- no matplotlib
