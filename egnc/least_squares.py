@@ -69,9 +69,11 @@ class QuadraticLoss:
     """Plain least squares: `rho(r) = 0.5 r^2`, weight 1."""
 
     def cost(self, r: np.ndarray) -> np.ndarray:
+        """`0.5 r^2` per edge, `(E,)`."""
         return 0.5 * r * r
 
     def weight(self, r: np.ndarray) -> np.ndarray:
+        """Weight 1 for every edge, `(E,)`."""
         return np.ones_like(r)
 
 

@@ -169,6 +169,7 @@ class CholmodSolver:
         self.factor = cholmod.analyze(pattern, ordering_method="natural" if ordered else "default")
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """Factorize the analysed pattern with values `data` and solve for `rhs`."""
         with serial_native_threads():
             try:
                 self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
@@ -188,6 +189,7 @@ class ScipySolver:
         self._permc_spec = "NATURAL" if ordered else "MMD_AT_PLUS_A"
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """Factorize the matrix with values `data` (SuperLU) and solve for `rhs`."""
         matrix = _matrix(data, self._indices, self._indptr)
         try:
             lu = spla.splu(

@@ -95,6 +95,7 @@ class EgncSchedule:
     _strong: np.ndarray = field(init=False)
 
     def first_stage(self, r: np.ndarray) -> Stage:
+        """Stage 0: `mu = 0` (quadratic SIG) on every robust factor; resets the per-factor state."""
         self._kernel = make_kernel("sig", c=self.c)
         self._mu = np.zeros(len(r))
         self._step = np.ones(len(r), dtype=np.int64)  # stage 0 is step 0; the next is step 1
@@ -102,6 +103,7 @@ class EgncSchedule:
         return self._stage()
 
     def next_stage(self, r: np.ndarray, converged: bool) -> Stage | None:
+        """Strong outliers go to `mu = 1`, the others to `mu*(r)` once, then 1; None when done."""
         if converged and np.all(self._mu[self.robust] == 1.0):
             return None
         above = exceeds(r, self.strong_quantile, self.d, self.threshold)
@@ -128,11 +130,13 @@ class RisamSchedule:
     _mu: float = field(init=False)
 
     def first_stage(self, r: np.ndarray) -> Stage:
+        """Stage 0: the shared `mu = mu_init`."""
         self._kernel = make_kernel("sig", c=self.c)
         self._mu = self.mu_init
         return self._stage(len(r))
 
     def next_stage(self, r: np.ndarray, converged: bool) -> Stage | None:
+        """Raise the shared `mu` by riSAM's rule; None once it is 1 and the solve converged."""
         if converged and self._mu == 1.0:
             return None
         self._mu = min(1.0, self._mu + 1.2 * (self._mu - self.mu_init + 0.1))
@@ -160,6 +164,7 @@ class YangGncSchedule:
     _previous_cost: float = field(init=False)
 
     def first_stage(self, r: np.ndarray) -> Stage:
+        """Stage 0: plain least squares (all weights 1), whose errors set the initial `mu`."""
         self._barc2 = gnc_barc2(self.d)
         self._kernel = make_kernel(f"gnc-{self.kind}", barc2=self._barc2)
         self._mu = None
@@ -168,6 +173,7 @@ class YangGncSchedule:
         return Stage(FixedWeightLoss(self._weights), np.full(len(r), np.nan))
 
     def next_stage(self, r: np.ndarray, converged: bool) -> Stage | None:
+        """Update `mu` and the fixed weights; None on GTSAM's stopping rules (cost, `mu`, binary weights)."""
         f = 0.5 * r * r
         if self._mu is None:
             self._mu = self._initial_mu(f[self.robust])
@@ -206,10 +212,12 @@ class SingleStage:
     kernel: Kernel
 
     def first_stage(self, r: np.ndarray) -> Stage:
+        """The only stage: the fixed kernel on the robust factors."""
         mu = np.zeros(len(r))
         return Stage(KernelLoss(self.kernel, mu, self.robust), np.full(len(r), np.nan))
 
     def next_stage(self, r: np.ndarray, converged: bool) -> Stage | None:
+        """Always None: there is one stage."""
         return None
 
 
