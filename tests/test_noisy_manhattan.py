@@ -81,6 +81,13 @@ def test_every_outlier_fails_the_chi2_test_at_the_ground_truth_and_at_the_outlie
     assert np.abs(egnc.solve(clean, "l2").graph.poses - noisy.reference).max() < 1e-6
 
 
+def test_a_larger_minimum_error_keeps_only_gross_outliers():
+    world = grid_world(2, 400, seed=5, noise_scale=0.0)
+    noisy = make_noisy_manhattan(world.graph, world.ground_truth, seed=2, outlier_min_r2=90.0)
+    for poses in (noisy.ground_truth, noisy.reference):
+        assert np.all(squared_errors_at(noisy.graph, poses)[noisy.is_outlier] > 90.0)
+
+
 def test_odometry_and_loop_noise_have_the_configured_statistics():
     world = grid_world(2, 3000, seed=8, noise_scale=0.0)
     noisy = make_noisy_manhattan(world.graph, world.ground_truth, seed=9, loop_sigma=(0.02, 0.005))
@@ -136,6 +143,7 @@ def test_manhattan3500(dataset_path):
         ({"loop_sigma": (-1.0, 0.0)}, "loop_sigma must be finite and non-negative"),
         ({"outlier_sigma": (0.0, 0.0)}, "outlier_sigma must have a positive entry"),
         ({"outlier_sigma": (1e-6, 1e-6)}, "outlier draws still pass as inliers"),
+        ({"outlier_min_r2": -1.0}, "outlier_min_r2 must be finite and non-negative"),
     ],
 )
 def test_invalid_arguments_raise(change, message):
