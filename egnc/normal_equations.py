@@ -77,7 +77,7 @@ class NormalEquationsPattern:
         num_free = len(free_rows)
         free_index = np.full(len(fixed), -1, dtype=np.int64)
         order = np.arange(num_free) if block_order is None else np.asarray(block_order, dtype=np.int64)
-        if sorted(order.tolist()) != list(range(num_free)):
+        if order.shape != (num_free,) or not np.array_equal(np.sort(order), np.arange(num_free)):
             raise ValueError(f"block_order must be a permutation of range({num_free})")
         free_index[free_rows[order]] = np.arange(num_free)
         size = num_free * d
