@@ -9,7 +9,7 @@ from scipy.stats import chi2
 from egnc.api import solve
 from egnc.datasets import add_false_loops, grid_world
 from egnc.errors import EgncError
-from egnc.gnc import GncOptions, known_inlier_mask
+from egnc.gnc import GncOptions, classify_inliers, known_inlier_mask
 from egnc.kernels import gnc_barc2
 from egnc.mu_star import mu_star
 from egnc.schedules import METHODS, EgncSchedule, RisamSchedule, YangGncSchedule
@@ -36,10 +36,21 @@ def test_graduated_methods_recover_the_clean_optimum(corrupted_world, method):
 
 def test_least_squares_is_corrupted_by_false_loops(corrupted_world):
     dim, clean, corrupted = corrupted_world
-    result = solve(corrupted.graph, "l2")
+    result = solve(corrupted.graph, "l2", gnc_options=GncOptions(outlier_threshold="squared"))
     error = np.abs(result.graph.poses[:, :dim] - clean.graph.poses[:, :dim]).max()
     assert error > 0.1
     assert np.count_nonzero(~result.inliers & ~corrupted.is_outlier) > 10  # true loops torn apart
+
+
+@pytest.mark.parametrize("d", [3, 6])
+def test_outlier_report_conventions(d):
+    q = chi2.ppf(0.95, d)
+    r = np.array([0.5 * np.sqrt(q), 0.5 * (np.sqrt(q) + q), 2.0 * q, 2.0 * q])
+    robust = np.array([True, True, True, False])
+    squared = classify_inliers(r, robust, d, GncOptions(outlier_threshold="squared"))
+    distance = classify_inliers(r, robust, d, GncOptions())
+    np.testing.assert_array_equal(squared, [True, False, False, True])
+    np.testing.assert_array_equal(distance, [True, True, False, True])  # the default is the reference's rule
 
 
 def test_result_reports_per_edge_diagnostics(corrupted_world):
