@@ -1,9 +1,11 @@
 """Regenerate every table of REPRODUCTION.md: `python benchmarks/reproduce.py SECTION... [options]`.
 
-Sections (each writes `results.csv`, `results.md` and plots into `OUT/<section>/`):
+Sections (each writes `results.csv`, `results.md` and plots into `OUT/<section>[/<part>]/`):
 
-- `table1`: false loop closures (paper's Table 1): CSAIL, Intel, Manhattan3500, Sphere2500 at
-  10/30/50 % with seeds 1-3, methods egnc, egnc[threshold=distance], risam, l2.
+- `table1`: false loop closures (paper's Table 1): CSAIL, Intel, Manhattan3500 at 10/30/50 % and
+  Sphere2500 at 10 % with seeds 1-3, methods egnc, egnc[threshold=distance], risam, l2 (about 12
+  minutes on 2 cores); Sphere2500 at 30/50 % with seed 1, egnc and risam only, 900 s per run
+  (runs of 150 to 900 s: about half an hour).
 - `gtsam`: egnc and the riSAM schedule next to GTSAM's GNC-GM and GNC-TLS on CSAIL, Intel and
   Manhattan3500 at 10/30 %, seed 1.
 - `table2`: noisy Manhattan (paper's Table 2): `--count` datasets made by
@@ -59,20 +61,35 @@ REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA_DIR = REPO.parent / "shared" / "datasets"
 
 BENCH_SECTIONS = {
-    "table1": [
-        "--datasets", "csail,intel,manhattanOlson3500,sphere2500", "--percent", "10,30,50", "--seeds", "1,2,3",
-        "--methods", "egnc,egnc[threshold=distance],risam,l2", "--time-limit", "300",
-    ],
-    "gtsam": [
-        "--datasets", "csail,intel,manhattanOlson3500", "--percent", "10,30", "--seeds", "1",
-        "--methods", "egnc,risam,gtsam-gnc-gm,gtsam-gnc-tls", "--time-limit", "300",
-    ],
-    "manhattan-noisy": [
-        "--irl", "{data_dir}/manhattan_noisy.irl",
-        "--methods", "egnc,egnc[threshold=distance],risam,gnc-tls,gtsam-gnc-tls", "--time-limit", "300",
-    ],
+    "table1": {
+        "table1/main": [
+            "--datasets", "csail,intel,manhattanOlson3500", "--percent", "10,30,50", "--seeds", "1,2,3",
+            "--methods", "egnc,egnc[threshold=distance],risam,l2", "--time-limit", "300",
+        ],
+        "table1/sphere10": [
+            "--datasets", "sphere2500", "--percent", "10", "--seeds", "1,2,3",
+            "--methods", "egnc,egnc[threshold=distance],risam,l2", "--time-limit", "300",
+        ],
+        # Runs of 150 to 900 s each: one seed, two methods.
+        "table1/sphere30-50": [
+            "--datasets", "sphere2500", "--percent", "30,50", "--seeds", "1",
+            "--methods", "egnc,risam", "--time-limit", "900",
+        ],
+    },
+    "gtsam": {
+        "gtsam": [
+            "--datasets", "csail,intel,manhattanOlson3500", "--percent", "10,30", "--seeds", "1",
+            "--methods", "egnc,risam,gtsam-gnc-gm,gtsam-gnc-tls", "--time-limit", "300",
+        ],
+    },
+    "manhattan-noisy": {
+        "manhattan-noisy": [
+            "--irl", "{data_dir}/manhattan_noisy.irl",
+            "--methods", "egnc,egnc[threshold=distance],risam,gnc-tls,gtsam-gnc-tls", "--time-limit", "300",
+        ],
+    },
 }  # fmt: skip
-"""`egnc-bench` arguments of each section (`--data-dir` and `--out` are added)."""
+"""`egnc-bench` runs of each section: output subfolder -> arguments (`--data-dir` and `--out` are added)."""
 
 SECTIONS = ("table1", "gtsam", "table2", "manhattan-noisy")
 
@@ -80,12 +97,15 @@ TABLE2_METHODS = "egnc,egnc[warm_start=true],risam,gnc-tls"
 """table2's methods: the default batch protocol (stages restart from the initial guess) and warm starts."""
 
 
-def bench_command(section: str, data_dir: Path, out: Path) -> list[str]:
-    """The `egnc-bench` command line of a section."""
-    arguments = [argument.replace("{data_dir}", str(data_dir)) for argument in BENCH_SECTIONS[section]]
-    if "--datasets" in arguments:
-        arguments += ["--data-dir", str(data_dir)]
-    return ["egnc-bench", *arguments, "--out", str(out / section)]
+def bench_commands(section: str, data_dir: Path, out: Path) -> list[list[str]]:
+    """The `egnc-bench` command lines of a section, one per output subfolder."""
+    commands = []
+    for folder, template in BENCH_SECTIONS[section].items():
+        arguments = [argument.replace("{data_dir}", str(data_dir)) for argument in template]
+        if "--datasets" in arguments:
+            arguments += ["--data-dir", str(data_dir)]
+        commands.append(["egnc-bench", *arguments, "--out", str(out / folder)])
+    return commands
 
 
 def run_table2(
@@ -262,15 +282,16 @@ def main(argv: list[str] | None = None) -> int:
                     write_datasets=args.write_datasets,
                 )
         else:
-            command = bench_command(section, args.data_dir, args.out)
-            print(f"# {section}: {shlex.join(command)}", flush=True)
-            if not args.dry_run:
+            for command in bench_commands(section, args.data_dir, args.out):
+                print(f"# {section}: {shlex.join(command)}", flush=True)
+                if args.dry_run:
+                    continue
                 status = subprocess.run(command, check=False).returncode
                 if status != 0:
                     print(f"reproduce: {section} failed with exit code {status}", file=sys.stderr)
                     return status
-                if section == "manhattan-noisy":
-                    run_ground_truth_errors(args.data_dir, args.out)
+            if section == "manhattan-noisy" and not args.dry_run:
+                run_ground_truth_errors(args.data_dir, args.out)
         if not args.dry_run:
             print(f"# {section}: {time.perf_counter() - started:.0f} s of wall time", flush=True)
     return 0
