@@ -36,7 +36,7 @@ def test_graduated_methods_recover_the_clean_optimum(corrupted_world, method):
 
 def test_least_squares_is_corrupted_by_false_loops(corrupted_world):
     dim, clean, corrupted = corrupted_world
-    result = solve(corrupted.graph, "l2", gnc_options=GncOptions(outlier_threshold="squared"))
+    result = solve(corrupted.graph, "l2")
     error = np.abs(result.graph.poses[:, :dim] - clean.graph.poses[:, :dim]).max()
     assert error > 0.1
     assert np.count_nonzero(~result.inliers & ~corrupted.is_outlier) > 10  # true loops torn apart
@@ -47,10 +47,10 @@ def test_outlier_report_conventions(d):
     q = chi2.ppf(0.95, d)
     r = np.array([0.5 * np.sqrt(q), 0.5 * (np.sqrt(q) + q), 2.0 * q, 2.0 * q])
     robust = np.array([True, True, True, False])
-    squared = classify_inliers(r, robust, d, GncOptions(outlier_threshold="squared"))
-    distance = classify_inliers(r, robust, d, GncOptions())
+    squared = classify_inliers(r, robust, d, GncOptions())  # the default: DESIGN.md section 4
+    distance = classify_inliers(r, robust, d, GncOptions(outlier_threshold="distance"))
     np.testing.assert_array_equal(squared, [True, False, False, True])
-    np.testing.assert_array_equal(distance, [True, True, False, True])  # the default is the reference's rule
+    np.testing.assert_array_equal(distance, [True, True, False, True])
 
 
 def test_result_reports_per_edge_diagnostics(corrupted_world):
