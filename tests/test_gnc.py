@@ -159,3 +159,13 @@ def test_every_method_runs_and_reports(corrupted_world, method):
     assert result.method == method
     assert np.isfinite(result.cost) and len(result.stages) >= 1
     assert result.iterations == sum(stage.iterations for stage in result.stages)
+
+
+def test_pruning_drops_negligible_loops_from_the_factorization(corrupted_world):
+    dim, clean, corrupted = corrupted_world
+    graph = corrupted.graph
+    assert all(stage.active_edges == graph.num_edges for stage in solve(graph, "egnc").stages[:3])
+    pruned = solve(graph, "egnc", gnc_options=GncOptions(prune_weight=1e-4))
+    assert min(stage.active_edges for stage in pruned.stages) < graph.num_edges
+    np.testing.assert_array_equal(~pruned.inliers, corrupted.is_outlier)
+    assert np.abs(pruned.graph.poses[:, :dim] - clean.graph.poses[:, :dim]).max() < 1e-6
