@@ -1,6 +1,11 @@
 """Synthetic benchmark data: grid-world pose graphs, false loop closures, noisy-Manhattan datasets and label files."""
 
-from egnc.datasets.false_loops import VARIANTS, CorruptedGraph, add_false_loops, false_loop_count
+from egnc.datasets.false_loops import (
+    VARIANTS,
+    CorruptedGraph,
+    add_false_loops,
+    false_loop_count,
+)
 from egnc.datasets.grid_world import GridWorld, grid_world
 from egnc.datasets.labels import read_labels, write_labels
 from egnc.datasets.noisy_manhattan import NoisyGraph, make_noisy_manhattan

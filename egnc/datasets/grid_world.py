@@ -37,7 +37,7 @@ import numpy as np
 
 from egnc.errors import EgncError
 from egnc.factors import from_matrices, group_of, to_matrices
-from egnc.graph import PoseGraph, TANGENT_SIZE
+from egnc.graph import TANGENT_SIZE, PoseGraph
 
 _MIN_SIGMA = 1e-6
 """A zero sigma makes the measurement exact; its information is capped at `1 / _MIN_SIGMA^2`."""
@@ -128,8 +128,8 @@ def grid_world(
         if not 0.0 <= value <= 1.0:
             raise EgncError(f"grid_world: {name} must lie in [0, 1], got {value}")
     d = TANGENT_SIZE[dim]
-    sigma_odometry = _sigmas(odometry_sigma, dim, "odometry_sigma")
-    sigma_loop = _sigmas(loop_sigma, dim, "loop_sigma")
+    sigma_odometry = expand_sigmas(odometry_sigma, dim, "grid_world: odometry_sigma")
+    sigma_loop = expand_sigmas(loop_sigma, dim, "grid_world: loop_sigma")
     if dim == 2:
         levels = 1
     elif levels is None:
@@ -154,16 +154,16 @@ def grid_world(
     T_i_j = group.between(T_world[edges[:, 0]], T_world[edges[:, 1]])
     sigma = np.where(is_loop[:, None], sigma_loop, sigma_odometry)
     Z = group.compose(T_i_j, group.exp(noise * (noise_scale * sigma)))
-    measurements = _rounded(from_matrices(dim, Z), decimals)
+    measurements = rounded(from_matrices(dim, Z), decimals)
 
     # Odometry edges are (k - 1, k) for k = 1..N-1, in this order among the edges.
     Z_odometry = to_matrices(dim, measurements[~is_loop])
     T_chain = _prefix_products(np.concatenate((T_world[:1], Z_odometry)))
-    poses = _rounded(from_matrices(dim, T_chain), decimals)
+    poses = rounded(from_matrices(dim, T_chain), decimals)
 
     information = np.zeros((len(edges), d, d))
     # Rounded too: 1 / 0.05^2 is 399.99999999999994 in floating point, and files should say 400.
-    information[:, np.arange(d), np.arange(d)] = _rounded(1.0 / np.maximum(sigma, _MIN_SIGMA) ** 2, decimals)
+    information[:, np.arange(d), np.arange(d)] = rounded(1.0 / np.maximum(sigma, _MIN_SIGMA) ** 2, decimals)
     graph = PoseGraph(
         dim=dim,
         vertex_ids=np.arange(num_poses, dtype=np.int64),
@@ -176,16 +176,25 @@ def grid_world(
     return GridWorld(graph=graph, ground_truth=ground_truth)
 
 
-def _sigmas(value: Sequence[float], dim: int, name: str) -> np.ndarray:
-    """Expand `(translation, rotation)` or `(d,)` standard deviations to `(d,)`."""
+def expand_sigmas(value: Sequence[float], dim: int, name: str) -> np.ndarray:
+    """Expand `(translation, rotation)` or `(d,)` standard deviations to `(d,)` (metres, radians).
+
+    Args:
+        value: two values, or one per tangent component (order `[v, omega]`).
+        dim: 2 or 3.
+        name: what the caller calls it, for the error message (e.g. `"grid_world: loop_sigma"`).
+
+    Raises:
+        EgncError: wrong length, or a negative or non-finite entry.
+    """
     d = TANGENT_SIZE[dim]
     sigma = np.asarray(value, dtype=np.float64)
     if sigma.shape == (2,):
         sigma = np.concatenate((np.full(dim, sigma[0]), np.full(d - dim, sigma[1])))
     if sigma.shape != (d,):
-        raise EgncError(f"grid_world: {name} must have 2 or {d} entries, got shape {sigma.shape}")
+        raise EgncError(f"{name} must have 2 or {d} entries, got shape {sigma.shape}")
     if not np.all(np.isfinite(sigma) & (sigma >= 0.0)):
-        raise EgncError(f"grid_world: {name} must be finite and non-negative, got {sigma.tolist()}")
+        raise EgncError(f"{name} must be finite and non-negative, got {sigma.tolist()}")
     return sigma
 
 
@@ -285,7 +294,7 @@ def _prefix_products(T: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rounded(values: np.ndarray, decimals: int | None) -> np.ndarray:
+def rounded(values: np.ndarray, decimals: int | None) -> np.ndarray:
     """`values` rounded to `decimals` places (unchanged when None), with -0.0 turned into 0.0."""
     if decimals is None:
         return np.array(values, dtype=np.float64)

@@ -67,9 +67,10 @@ import numpy as np
 import scipy.stats
 
 from egnc.api import solve
+from egnc.datasets.grid_world import expand_sigmas, rounded
 from egnc.errors import EgncError
 from egnc.factors import from_matrices, group_of, to_matrices
-from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.graph import POSE_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.irl import IrlLog
 
@@ -172,9 +173,9 @@ def make_noisy_manhattan(
         raise EgncError("make_noisy_manhattan: ground_truth contains NaN or infinite values")
     if not 0.0 <= outlier_fraction <= 1.0:
         raise EgncError(f"make_noisy_manhattan: outlier_fraction must lie in [0, 1], got {outlier_fraction}")
-    sigma_odometry = _sigmas(odometry_sigma, dim, "odometry_sigma")
-    sigma_loop = _sigmas(loop_sigma, dim, "loop_sigma")
-    sigma_outlier = _sigmas(outlier_sigma, dim, "outlier_sigma")
+    sigma_odometry = expand_sigmas(odometry_sigma, dim, "make_noisy_manhattan: odometry_sigma")
+    sigma_loop = expand_sigmas(loop_sigma, dim, "make_noisy_manhattan: loop_sigma")
+    sigma_outlier = expand_sigmas(outlier_sigma, dim, "make_noisy_manhattan: outlier_sigma")
     is_odometry = graph.is_odometry
     loops = np.flatnonzero(~is_odometry)
     count = outlier_count(len(loops), outlier_fraction)
@@ -192,7 +193,7 @@ def make_noisy_manhattan(
     T_world = to_matrices(dim, ground_truth)
     T_i_j = group.between(T_world[graph.edges[:, 0]], T_world[graph.edges[:, 1]])
     sigma = np.where(is_odometry[:, None], sigma_odometry, sigma_loop)
-    measurements = _rounded(from_matrices(dim, group.compose(T_i_j, group.exp(noise * sigma))), decimals)
+    measurements = rounded(from_matrices(dim, group.compose(T_i_j, group.exp(noise * sigma))), decimals)
 
     # The outlier-free optimum, solved from the ground truth; the outliers' measurements do not enter it.
     keep = ~is_outlier
@@ -212,7 +213,7 @@ def make_noisy_manhattan(
         if len(pending) == 0:
             break
         perturbation = rng.standard_normal((len(pending), d)) * sigma_outlier
-        candidates = _rounded(from_matrices(dim, group.compose(T_i_j[pending], group.exp(perturbation))), decimals)
+        candidates = rounded(from_matrices(dim, group.compose(T_i_j[pending], group.exp(perturbation))), decimals)
         Z_inverse = group.inverse(to_matrices(dim, candidates))
         information = graph.information[pending]
         accept = np.ones(len(pending), dtype=bool)
@@ -234,7 +235,7 @@ def make_noisy_manhattan(
     noisy = PoseGraph(
         dim=dim,
         vertex_ids=graph.vertex_ids,
-        poses=_rounded(poses, decimals),
+        poses=rounded(poses, decimals),
         edges=graph.edges,
         measurements=measurements,
         information=graph.information,
@@ -245,23 +246,3 @@ def make_noisy_manhattan(
     for array in (is_outlier, ground_truth, reference):
         array.setflags(write=False)
     return NoisyGraph(graph=noisy, is_outlier=is_outlier, ground_truth=ground_truth, reference=reference)
-
-
-def _sigmas(value: Sequence[float], dim: int, name: str) -> np.ndarray:
-    """Expand `(translation, rotation)` or `(d,)` standard deviations to `(d,)`."""
-    d = TANGENT_SIZE[dim]
-    sigma = np.asarray(value, dtype=np.float64)
-    if sigma.shape == (2,):
-        sigma = np.concatenate((np.full(dim, sigma[0]), np.full(d - dim, sigma[1])))
-    if sigma.shape != (d,):
-        raise EgncError(f"make_noisy_manhattan: {name} must have 2 or {d} entries, got shape {sigma.shape}")
-    if not np.all(np.isfinite(sigma) & (sigma >= 0.0)):
-        raise EgncError(f"make_noisy_manhattan: {name} must be finite and non-negative, got {sigma.tolist()}")
-    return sigma
-
-
-def _rounded(values: np.ndarray, decimals: int | None) -> np.ndarray:
-    """`values` rounded to `decimals` places (unchanged when None), with -0.0 turned into 0.0."""
-    if decimals is None:
-        return np.array(values, dtype=np.float64)
-    return np.round(values, decimals) + 0.0
