@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from egnc.connectivity import require_connected
-from egnc.io.atomic import atomic_text_file
 from egnc.errors import G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
+from egnc.io.atomic import atomic_text_file
 
 _MIN_QUATERNION_NORM = 1e-6
 """Quaternions shorter than this are treated as corrupt rather than normalized."""
