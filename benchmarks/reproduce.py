@@ -196,7 +196,8 @@ def run_ground_truth_errors(data_dir: Path, out: Path, methods: tuple[str, ...] 
     lines = [
         "| trajectory | ATE vs ground truth (m) | RPE vs ground truth (%) |",
         "|---|---:|---:|",
-        f"| initial guess (odometry) | {ate(log.graph.poses, truth, 2):.3f} | {rpe(log.graph.poses, truth, 2).percent:.2f} |",
+        f"| initial guess (odometry) | {ate(log.graph.poses, truth, 2):.3f} "
+        f"| {rpe(log.graph.poses, truth, 2).percent:.2f} |",
     ]
     for name, result in solutions.items():
         poses = result.graph.poses

@@ -167,7 +167,9 @@ class BetweenFactors:
         x_ij, y_ij = c_i * dx + s_i * dy, c_i * dy - s_i * dx
         # Z^-1 X_i^-1 X_j.
         zc, zs, zx, zy = self.Z_inv[:, 0, 0], self.Z_inv[:, 1, 0], self.Z_inv[:, 0, 2], self.Z_inv[:, 1, 2]
-        e = se2.log_components(zc * c_ij - zs * s_ij, zs * c_ij + zc * s_ij, zc * x_ij - zs * y_ij + zx, zs * x_ij + zc * y_ij + zy)
+        e = se2.log_components(
+            zc * c_ij - zs * s_ij, zs * c_ij + zc * s_ij, zc * x_ij - zs * y_ij + zx, zs * x_ij + zc * y_ij + zy
+        )
         # X_j^-1 X_i = (X_i^-1 X_j)^-1 = (R_ij^T, -R_ij^T t_ij).
         T_j_i = np.zeros((len(i), 3, 3))
         T_j_i[:, 0, 0] = T_j_i[:, 1, 1] = c_ij

@@ -291,7 +291,14 @@ def refine_on_inliers(
         poses = refined.poses
         reports.append(
             StageReport(
-                np.nan, np.nan, np.nan, refined.iterations, refined.cost, refined.time_s, refined.status, int(inliers.sum())
+                np.nan,
+                np.nan,
+                np.nan,
+                refined.iterations,
+                refined.cost,
+                refined.time_s,
+                refined.status,
+                int(inliers.sum()),
             )
         )
         if on_stage is not None:

@@ -92,7 +92,9 @@ def read_csv(path: Path) -> list[dict[str, str]]:
 
 def test_tiny_grid_writes_csv_and_markdown(tmp_path):
     lines: list[str] = []
-    records = run_grid(["grid2d"], [30], [1], ["egnc", "l2"], data_dir=DATASETS, time_limit_s=120, progress=lines.append)
+    records = run_grid(
+        ["grid2d"], [30], [1], ["egnc", "l2"], data_dir=DATASETS, time_limit_s=120, progress=lines.append
+    )
     assert lines[0].startswith("[1/2] grid2d 30% seed 1 egnc: ok P 1.000 R 1.000") and lines[1].startswith("[2/2]")
     written = write_outputs(records, tmp_path / "out", baseline_method="egnc", header="my header")
     rows = {row["method"]: row for row in read_csv(written["csv"])}
@@ -132,7 +134,9 @@ def test_cli_runs_the_grid_quietly_and_reports_usage_errors(tmp_path):
     assert run.returncode == 0, run.stderr
     assert run.stdout == "" and run.stderr == ""
     (row,) = read_csv(tmp_path / "out" / "results.csv")
-    assert (row["method"], row["percent"], row["seed"], row["status"]) == ("egnc[threshold=distance]", "10.0", "3", "ok")
+    assert (row["method"], row["percent"], row["seed"], row["status"]) == (
+        "egnc[threshold=distance]", "10.0", "3", "ok"
+    )
     assert "`egnc-bench --datasets grid2d" in (tmp_path / "out" / "results.md").read_text()
 
     run = subprocess.run([*command, "--datasets", "nowhere", "--data-dir", DATASETS, "--out", tmp_path / "x"],

@@ -215,17 +215,25 @@ ERROR_CASES = {
     "too many fields": (V2 + V2B + E2.replace("\n", " 7\n"), 3, "EDGE_SE2 needs 11 fields"),
     "line numbers count comments and blanks": ("# header\n\n" + V2 + "VERTEX_SE2 1 0 0\n" + E2, 4, "found 3"),
     "non-numeric value": (V2 + "VERTEX_SE2 1 0 abc 0\n" + E2, 2, "field 3 is 'abc', expected a number"),
-    "non-integer id": (V2 + V2B + E2.replace("0 1 ", "0 1.5 ", 1), 3, "field 2 is '1.5', expected an integer vertex id"),
+    "non-integer id": (
+        V2 + V2B + E2.replace("0 1 ", "0 1.5 ", 1), 3, "field 2 is '1.5', expected an integer vertex id"
+    ),
     "id out of range": (V2 + E2.replace("0 1 ", "0 99999999999999999999 ", 1), 2, "expected an integer vertex id"),
     "truncated last line": (V2 + V2B + E2[:30], 3, "file looks truncated"),
     "truncated inside a number": (V2 + V2B + E2.rstrip("\n") + "e", 3, "file looks truncated"),
-    "unknown tag": (V2 + "VERTEX_XY 7 1 2\n" + E2, 2, "unknown tag 'VERTEX_XY'; pass skip_unknown=True / --skip-unknown"),
+    "unknown tag": (
+        V2 + "VERTEX_XY 7 1 2\n" + E2, 2, "unknown tag 'VERTEX_XY'; pass skip_unknown=True / --skip-unknown"
+    ),
     "nan": (V2 + "VERTEX_SE2 1 nan 0 0\n" + E2, 2, "field 2 is nan, expected a finite number"),
     "inf in information": (V2 + V2B + E2.replace(" 0.0 1.0\n", " inf 1.0\n"), 3, "is inf"),
-    "indefinite information": (V2 + V2B + E2.replace("1.0 0.0 0.0 1.0", "1.0 2.0 0.0 1.0", 1), 3, "not positive definite"),
+    "indefinite information": (
+        V2 + V2B + E2.replace("1.0 0.0 0.0 1.0", "1.0 2.0 0.0 1.0", 1), 3, "not positive definite"
+    ),
     "zero information": (V2 + V2B + E2.replace("1.0", "0.0"), 3, "not positive definite"),
     "2D and 3D mixed": (V2 + V3.replace(" 0 ", " 1 ", 1) + E2, 2, "VERTEX_SE3:QUAT is 3D but line 1 is 2D"),
-    "duplicate vertex id": (V2 + V2B + "VERTEX_SE2 0 1 1 1\n" + E2, 3, "vertex id 0 is defined twice, on lines 1 and 3"),
+    "duplicate vertex id": (
+        V2 + V2B + "VERTEX_SE2 0 1 1 1\n" + E2, 3, "vertex id 0 is defined twice, on lines 1 and 3"
+    ),
     "edge to itself": (V2 + V2B + E2 + E2.replace("0 1 ", "1 1 ", 1), 4, "edge joins vertex 1 to itself"),
     "zero vertex quaternion": (V3 + QUAT_ZERO + E3, 2, "too small to normalize"),
     "zero edge quaternion": (V3 + E3.replace(" 0 0 1 1.0", " 0 0 0 1.0", 1), 2, "too small to normalize"),

@@ -12,7 +12,10 @@ from egnc.io import read_g2o
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import cholmod_available
 
-BACKENDS = ["scipy", pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse"))]
+BACKENDS = [
+    "scipy",
+    pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+]
 
 # GTSAM 4.3 LevenbergMarquardtOptimizer from each file's initial guess, prior sigma 1e-3 on the
 # first pose, relative/absolute error tolerance 1e-12 (benchmarks/gtsam_baseline.py reproduces them).
@@ -84,7 +87,9 @@ def dense_gauss_newton(graph: PoseGraph, iterations: int) -> np.ndarray:
             L = np.linalg.cholesky(graph.information[k]).T  # whitening: L^T L = Omega
             J[k * d : (k + 1) * d, i * d : (i + 1) * d] = L @ lin.J_e_xi[k]
             J[k * d : (k + 1) * d, j * d : (j + 1) * d] = L @ lin.J_e_xj[k]
-        e = np.concatenate([np.linalg.cholesky(graph.information[k]).T @ lin.residuals[k] for k in range(graph.num_edges)])
+        e = np.concatenate(
+            [np.linalg.cholesky(graph.information[k]).T @ lin.residuals[k] for k in range(graph.num_edges)]
+        )
         Jf = J[:, d:]  # pose 0 fixed
         step = np.linalg.solve(Jf.T @ Jf, -Jf.T @ e)
         T[1:] = group.rplus(T[1:], step.reshape(-1, d))

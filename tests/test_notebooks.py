@@ -113,7 +113,9 @@ def test_line_fitting_prints_its_answer(run_notebook):
     """The Fig. 2 notebook ends with an explicit answer line; EGNC reaches a = 1 in fewer stages."""
     notebook, _ = run_notebook("02_line_fitting.ipynb")
     text = "".join(output.get("text", "") for output in code_outputs(notebook))
-    answer = re.search(r"^EGNC: a = ([\d.]+) after (\d+) stages; riSAM: a = ([\d.]+) after (\d+) stages$", text, re.MULTILINE)
+    answer = re.search(
+        r"^EGNC: a = ([\d.]+) after (\d+) stages; riSAM: a = ([\d.]+) after (\d+) stages$", text, re.MULTILINE
+    )
     assert answer, text
     egnc_a, egnc_stages, risam_a, risam_stages = float(answer[1]), int(answer[2]), float(answer[3]), int(answer[4])
     assert abs(egnc_a - 1.0) < 0.1 and abs(risam_a - 1.0) < 0.1
@@ -126,7 +128,12 @@ def test_readme_snippet_prints_the_line_it_shows():
     snippet = re.search(r"```python\n(.*?)```", readme, re.DOTALL)
     assert snippet, "README.md has no python snippet"
     process = subprocess.run(
-        [sys.executable, "-c", snippet[1]], check=False, capture_output=True, text=True, timeout=TIMEOUT_S, cwd=NOTEBOOKS
+        [sys.executable, "-c", snippet[1]],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+        cwd=NOTEBOOKS,
     )
     assert process.returncode == 0, process.stderr
     line = process.stdout.strip()

@@ -115,7 +115,10 @@ def log(T) -> np.ndarray:
 
 
 def log_components(cos_t, sin_t, tx, ty) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return `(v_x, v_y, w)` of the log of the pose with rotation `(cos t, sin t)` and translation `(t_x, t_y)`; see `log`."""
+    """Return `(v_x, v_y, w)` of the log of the pose with rotation `(cos t, sin t)` and translation `(t_x, t_y)`.
+
+    See `log`.
+    """
     w = wrap_angle(np.arctan2(sin_t, cos_t))
     # V^-1 = [[a, w/2], [-w/2, a]], a = (w/2) cot(w/2); half-angle terms straight from R, no trig calls.
     sin_half, cos_half = sincos_half_from_cos_sin(cos_t, sin_t)
