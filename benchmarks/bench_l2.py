@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import functools
 import os
 import platform
 import statistics
@@ -141,7 +142,7 @@ def compare_file(name: str, repeat: int = 3) -> FileResult:
             egnc_iterations = result.iterations
         cli_times["gtsam"].append(_timed(lambda: gtsam_cli(path))[0])
         for backend in BACKENDS:
-            cli_times[backend].append(_timed(lambda: egnc_cli(path, backend))[0])
+            cli_times[backend].append(_timed(functools.partial(egnc_cli, path, backend))[0])
     return FileResult(
         name=path.stem,
         egnc_iterations=egnc_iterations,
@@ -154,7 +155,10 @@ def compare_file(name: str, repeat: int = 3) -> FileResult:
 
 
 def bare_factorization_ms(graph, poses: np.ndarray, repeat: int) -> float:
-    """Median ms of one CHOLMOD `cholesky_inplace` of `H + 1e-8 diag(H)` at `poses`, with the solver's analysis and threads."""
+    """Median ms of one CHOLMOD `cholesky_inplace` of `H + 1e-8 diag(H)` at `poses`.
+
+    With the solver's analysis and threads.
+    """
     problem = Problem.from_graph(graph, "cholmod")
     pattern = problem.pattern
     linearization = problem.factors.linearize(poses)
@@ -192,7 +196,9 @@ def profile_iterations(name: str, repeat: int = 3) -> list[IterationProfile]:
             phase: 1e3 * statistics.median(run.timings[phase] for run in runs[backend]) / max(last.iterations, 1)
             for phase in PHASES
         }
-        profiles.append(IterationProfile(Path(name).stem, backend, last.iterations, last.linear_solves, per_iteration, floor))
+        profiles.append(
+            IterationProfile(Path(name).stem, backend, last.iterations, last.linear_solves, per_iteration, floor)
+        )
     return profiles
 
 
