@@ -27,7 +27,7 @@ def atomic_binary_file(path: Path) -> contextlib.AbstractContextManager[BinaryIO
 
 
 @contextlib.contextmanager
-def _atomic_file(path: Path, mode: str, **open_kwargs: str) -> Iterator:
+def _atomic_file(path: Path, mode: str, encoding: str | None = None, newline: str | None = None) -> Iterator:
     """The one implementation: temporary file beside `path`, fsync, `os.replace`, cleanup on failure."""
     temporary = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
@@ -36,7 +36,7 @@ def _atomic_file(path: Path, mode: str, **open_kwargs: str) -> Iterator:
     except OSError as error:
         raise EgncError(f"{path}: cannot write file: {error.strerror or error}") from None
     try:
-        with os.fdopen(descriptor, mode, **open_kwargs) as out:
+        with os.fdopen(descriptor, mode, encoding=encoding, newline=newline) as out:
             yield out
             out.flush()
             os.fsync(out.fileno())

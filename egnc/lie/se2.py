@@ -122,7 +122,8 @@ def log_components(cos_t, sin_t, tx, ty) -> tuple[np.ndarray, np.ndarray, np.nda
     w = wrap_angle(np.arctan2(sin_t, cos_t))
     # V^-1 = [[a, w/2], [-w/2, a]], a = (w/2) cot(w/2); half-angle terms straight from R, no trig calls.
     sin_half, cos_half = sincos_half_from_cos_sin(cos_t, sin_t)
-    a = _half_angle_cot(w * w, *trig_coefficients(w * w, 3, sin_half, cos_half), sin_half, cos_half)
+    f1, f2, f3 = trig_coefficients(w * w, 3, sin_half, cos_half)
+    a = _half_angle_cot(w * w, f1, f2, f3, sin_half, cos_half)
     h = 0.5 * w
     return a * tx + h * ty, a * ty - h * tx, w
 

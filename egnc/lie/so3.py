@@ -117,7 +117,8 @@ def right_jacobian_inverse(omega) -> np.ndarray:
     w = split(as_float_array(omega, (3,), "omega"), 1)
     theta2 = sq_norm(w)
     half = sincos_half(theta2)
-    g = jacobian_inverse_coefficient(theta2, *trig_coefficients(theta2, 3, *half), *half)
+    f1, f2, f3 = trig_coefficients(theta2, 3, *half)
+    g = jacobian_inverse_coefficient(theta2, f1, f2, f3, *half)
     return join(skew_poly(w, 0.5, g), 2)
 
 
