@@ -58,8 +58,8 @@ class PoseGraph:
     edges: np.ndarray
     measurements: np.ndarray
     information: np.ndarray
-    fixed: np.ndarray = field(default=None)  # type: ignore[assignment]
-    edge_lines: np.ndarray = field(default=None)  # type: ignore[assignment]
+    fixed: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    edge_lines: np.ndarray = field(default=None)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         if self.dim not in POSE_SIZE:

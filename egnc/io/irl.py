@@ -127,7 +127,7 @@ class IrlLog:
     is_outlier: np.ndarray
     has_null: np.ndarray
     prior: IrlPrior | None = None
-    entry_lines: np.ndarray = field(default=None)  # type: ignore[assignment]
+    entry_lines: np.ndarray = field(default=None)  # type: ignore[arg-type]
     graph: PoseGraph = field(init=False)
 
     def __post_init__(self) -> None:
