@@ -369,7 +369,7 @@ class _EntryParser:
             vertex_id = self.integer(fields, 3, "pose id", number)
             values = self.floats(fields, 4, number)
             m = IRL_POSE_SIZE[self.dim]
-            self.prior = IrlPrior(vertex_id, values[:m], np.reshape(values[m:], (d, d)))
+            self.prior = IrlPrior(vertex_id, np.array(values[:m]), np.reshape(values[m:], (d, d)))
             self.prior_line = number
             return
         if tag == "ODOMETRY":
