@@ -139,7 +139,7 @@ def add_false_loops(
         rng=np.random.default_rng(seed),
         T_world=to_matrices(graph.dim, reference_poses),
         dim=graph.dim,
-        forward=2 * np.count_nonzero(loops[:, 0] < loops[:, 1]) >= len(loops),
+        forward=bool(2 * np.count_nonzero(loops[:, 0] < loops[:, 1]) >= len(loops)),
         close_radius=close_radius if variant == "close" else None,
     )
     false_edges = np.concatenate([sampler.draw(n, size) for n, size in segments])
