@@ -378,12 +378,13 @@ def _check_positive_definite(information: np.ndarray, lines: np.ndarray, context
 
 def _fixed_mask(fixes: _Records, vertex_ids: np.ndarray, context: _Context) -> np.ndarray:
     """Return the `(N,)` bool mask of vertices named by FIX lines."""
-    fixed_ids, fixed_lines = [], []
+    listed_ids: list[int] = []
+    fixed_lines: list[int] = []
     for row, line_number in zip(fixes.rows, fixes.lines):
         for position, token in enumerate(row[1:], start=1):
-            fixed_ids.append(_parse_id(token, _FIX, position, line_number, context))
+            listed_ids.append(_parse_id(token, _FIX, position, line_number, context))
             fixed_lines.append(line_number)
-    fixed_ids = np.array(fixed_ids, dtype=np.int64)
+    fixed_ids = np.array(listed_ids, dtype=np.int64)
     rows = np.minimum(np.searchsorted(vertex_ids, fixed_ids), len(vertex_ids) - 1)
     unknown = np.flatnonzero(vertex_ids[rows] != fixed_ids)
     if len(unknown):
