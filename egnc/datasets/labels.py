@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -101,6 +101,6 @@ def read_labels(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
     return is_outlier, meta
 
 
-def _is_int(value: object) -> bool:
+def _is_int(value: object) -> TypeGuard[int]:
     """Whether a parsed JSON value is an integer (JSON booleans are not)."""
     return isinstance(value, int) and not isinstance(value, bool)
