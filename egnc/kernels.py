@@ -339,11 +339,11 @@ def _build_gm(c: float = 3.0) -> Kernel:
 
 def _gnc_threshold(d: int | None, barc2: float | None, p: float) -> float:
     """Resolve the GNC inlier threshold from exactly one of `d` and `barc2`."""
-    if (d is None) == (barc2 is None):
-        raise EgncError("GNC kernels need exactly one of d (factor dimension) or barc2")
-    if barc2 is not None:
+    if barc2 is not None and d is None:
         return _positive("barc2", barc2)
-    return gnc_barc2(d, p)
+    if d is not None and barc2 is None:
+        return gnc_barc2(d, p)
+    raise EgncError("GNC kernels need exactly one of d (factor dimension) or barc2")
 
 
 def _build_gnc_gm(d: int | None = None, barc2: float | None = None, p: float = 0.99) -> Kernel:
