@@ -242,7 +242,7 @@ def solve_least_squares(
     status = 0
     data = gradient = None  # normal equations at T, built when a step from T is needed
     while iterations < options.max_iterations:
-        if data is None:
+        if data is None or gradient is None:  # always set and cleared together
             with clock("linearize"):
                 linearization = factors.linearize(T, errors)  # reuses the residuals at T
             with clock("assemble"):
