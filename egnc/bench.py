@@ -118,7 +118,8 @@ class MethodSpec:
 
     def gnc_options(self) -> GncOptions:
         """The `GncOptions` with this spec's overrides."""
-        return GncOptions(**dict(self.overrides))
+        overrides: dict[str, typing.Any] = dict(self.overrides)  # each value has its field's type (parse_method)
+        return GncOptions(**overrides)
 
 
 _SPEC = re.compile(r"^\s*([A-Za-z0-9_-]+)\s*(?:\[(.*)\])?\s*$", re.DOTALL)
@@ -303,7 +304,7 @@ def run_case(
     status, payload = _in_child(_solve_and_score, (case, spec, linear_solver), time_limit_s)
     wall_s = time.perf_counter() - started
     loops = int(np.count_nonzero(~case.known_inliers))
-    common = dict(
+    common: dict[str, typing.Any] = dict(
         dataset=case.dataset,
         percent=case.percent,
         seed=case.seed,
@@ -314,6 +315,7 @@ def run_case(
     )
     if status != "ok":
         return RunRecord(status=status, **common)
+    assert payload is not None  # an "ok" status carries the child's value
     return RunRecord(status="ok", **payload, **common)
 
 
@@ -358,7 +360,10 @@ def _reference(graph: PoseGraph, linear_solver: str) -> np.ndarray:
     return solve(graph, "l2", linear_solver=linear_solver).graph.poses
 
 
-def _in_child(target: Callable, args: tuple, time_limit_s: float) -> tuple[str, object]:
+_T = typing.TypeVar("_T")
+
+
+def _in_child(target: Callable[..., _T], args: tuple, time_limit_s: float) -> tuple[str, _T | None]:
     """Run `target(*args)` in a forked child; `("ok", value)`, `("timeout", None)` or `("error: ...", None)`."""
     context = multiprocessing.get_context("fork")
     receiver, sender = context.Pipe(duplex=False)
