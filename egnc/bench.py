@@ -429,6 +429,7 @@ def _gtsam_solve(graph: PoseGraph, known_inliers: np.ndarray, method: str) -> tu
         factors.add(gtsam.PriorFactorPose3(key, initial.atPose3(key), noise))
     else:
         factors.add(gtsam.PriorFactorPose2(key, initial.atPose2(key), noise))
+    optimizer: typing.Any  # LevenbergMarquardtOptimizer or GncLMOptimizer; only the first has iterations()
     if method == "gtsam-lm":
         params = gtsam.LevenbergMarquardtParams()
         params.setRelativeErrorTol(1e-12)
@@ -436,10 +437,10 @@ def _gtsam_solve(graph: PoseGraph, known_inliers: np.ndarray, method: str) -> tu
         params.setMaxIterations(1000)
         optimizer = gtsam.LevenbergMarquardtOptimizer(factors, initial, params)
     else:
-        params = gtsam.GncLMParams(gtsam.LevenbergMarquardtParams())
-        params.setLossType(gtsam.GncLossType.GM if method == "gtsam-gnc-gm" else gtsam.GncLossType.TLS)
-        params.setKnownInliers([int(k) for k in np.flatnonzero(known_inliers)] + [graph.num_edges])
-        optimizer = gtsam.GncLMOptimizer(factors, initial, params)
+        gnc_params = gtsam.GncLMParams(gtsam.LevenbergMarquardtParams())
+        gnc_params.setLossType(gtsam.GncLossType.GM if method == "gtsam-gnc-gm" else gtsam.GncLossType.TLS)
+        gnc_params.setKnownInliers([int(k) for k in np.flatnonzero(known_inliers)] + [graph.num_edges])
+        optimizer = gtsam.GncLMOptimizer(factors, initial, gnc_params)
     started = time.perf_counter()
     values = optimizer.optimize()
     time_s = time.perf_counter() - started
