@@ -13,6 +13,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from egnc import __version__
 from egnc.api import METHODS, Result, StageReport, solve
 from egnc.errors import EgncError
@@ -132,13 +134,15 @@ def _finite_or_none(value: float) -> float | None:
 def summary(result: Result) -> str:
     """A short human-readable summary of a solve."""
     graph = result.graph
+    accepted_cost = 0.5 * float(np.sum(result.residual_norms[result.inliers] ** 2))
     return "\n".join(
         [
             f"poses {graph.num_poses}, edges {graph.num_edges}, loop closures {int(graph.is_loop_closure.sum())}"
             f" ({graph.dim}D)",
             f"method {result.method}, linear solver {result.linear_solver}",
-            f"cost {result.initial_cost:.10g} -> {result.cost:.10g} in {len(result.stages)} stages,"
-            f" {result.iterations} iterations ({result.message})",
+            f"least-squares cost {result.initial_cost:.10g} -> {result.cost:.10g} over all edges,"
+            f" {accepted_cost:.10g} over the accepted ones",
+            f"{len(result.stages)} stages, {result.iterations} iterations ({result.message})",
             f"rejected {len(result.rejected_edges)} of {int((~result.known_inliers).sum())} loop closures"
             f" (candidates: edges not known inliers)",
             f"time {result.time_s:.3f} s",
