@@ -29,6 +29,9 @@ EXAMPLES = """examples:
   egnc-solve graph.g2o --drop-outliers -o inliers_only.g2o
   egnc-solve graph.g2o --method l2 --linear-solver scipy
   egnc-solve graph.g2o --plot trajectory.png
+
+exit codes: 0 success; 1 error in the input, the solve or an output (one line on stderr, no
+partial output file); 2 bad command-line usage.
 """
 
 
