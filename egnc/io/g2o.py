@@ -31,6 +31,7 @@ from egnc.errors import G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
+from egnc.io.text import read_text
 
 _MIN_QUATERNION_NORM = 1e-6
 """Quaternions shorter than this are treated as corrupt rather than normalized."""
@@ -109,7 +110,7 @@ def read_g2o(path: str | os.PathLike, *, skip_unknown: bool = False) -> PoseGrap
         GraphError: the file is well formed but its graph is disconnected.
     """
     path = Path(path)
-    text = _read_text(path)
+    text = read_text(path)
     lines = text.split("\n")
     context = _Context(path, text, len(lines))
     dim, vertices, edges, fixes = _split_records(lines, context, skip_unknown)
@@ -195,19 +196,6 @@ def write_g2o(
             (graph.measurements[keep], graph.information[keep][:, rows_upper, cols_upper]), axis=1
         )
         out.write(_format_records(edge_tag.name, graph.vertex_ids[graph.edges[keep]], edge_values))
-
-
-def _read_text(path: Path) -> str:
-    """Return the file's text, turning I/O and encoding failures into `G2oFormatError`."""
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise G2oFormatError(f"cannot read file: {exc.strerror or exc}", path) from exc
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise G2oFormatError("not a text file (invalid UTF-8 byte)", path, line) from exc
 
 
 def _split_records(

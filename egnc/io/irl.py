@@ -57,6 +57,7 @@ from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
+from egnc.io.text import read_text
 from egnc.lie import so3
 
 __all__ = ["IrlLog", "IrlPrior", "read_irl", "write_irl"]
@@ -240,7 +241,7 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
             reached by odometry, a covariance that is not positive definite).
     """
     path = Path(path)
-    text = _read_text(path)
+    text = read_text(path)
     lines = text.split("\n")
     if text.endswith("\n"):
         lines.pop()
@@ -442,19 +443,6 @@ class _EntryParser:
                 message = f"{fields[0]} field {position} is {fields[position]}, expected a finite number"
                 raise self.error(message, number)
         return values
-
-
-def _read_text(path: Path) -> str:
-    """The file's text; I/O and encoding failures become `G2oFormatError`."""
-    try:
-        data = path.read_bytes()
-    except OSError as error:
-        raise G2oFormatError(f"cannot read file: {error.strerror or error}", path) from None
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as error:
-        line = data.count(b"\n", 0, error.start) + 1
-        raise G2oFormatError("not a text file (invalid UTF-8 byte)", path, line) from None
 
 
 def _check_covariances(covariances: np.ndarray, lines: np.ndarray, path: Path) -> None:
