@@ -41,9 +41,10 @@ import numpy as np
 import scipy.sparse as sp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from gtsam_baseline import PRIOR_SIGMA, dataset_path, g2o_is_3d, lm_params  # noqa: E402
+from gtsam_baseline import dataset_path, g2o_is_3d, lm_params  # noqa: E402
 
 from egnc import cli, solve  # noqa: E402
+from egnc.bench import add_gtsam_reference_prior  # noqa: E402
 from egnc.factors import to_matrices  # noqa: E402
 from egnc.io import read_g2o  # noqa: E402
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares  # noqa: E402
@@ -95,13 +96,7 @@ def gtsam_problem(path: Path) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]
     """`readG2o` plus the reference prior on the lowest id (as `gtsam_baseline.load_g2o`, minus its bookkeeping)."""
     is_3d = g2o_is_3d(path)
     graph, initial = gtsam.readG2o(str(path), is_3d)
-    first = min(initial.keys())
-    if is_3d:
-        noise = gtsam.noiseModel.Isotropic.Sigma(6, PRIOR_SIGMA)
-        graph.add(gtsam.PriorFactorPose3(first, initial.atPose3(first), noise))
-    else:
-        noise = gtsam.noiseModel.Isotropic.Sigma(3, PRIOR_SIGMA)
-        graph.add(gtsam.PriorFactorPose2(first, initial.atPose2(first), noise))
+    add_gtsam_reference_prior(graph, initial, min(initial.keys()), is_3d)
     return graph, initial
 
 

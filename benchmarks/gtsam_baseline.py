@@ -48,12 +48,14 @@ from typing import Literal
 import gtsam
 import numpy as np
 
+from egnc.bench import GTSAM_PRIOR_SIGMA, add_gtsam_reference_prior
+
 # `../shared/datasets` beside the checkout (see that folder's README); EGNC_DATASETS overrides.
 DATASETS_DIR = Path(
     os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
 )
 
-PRIOR_SIGMA = 1e-3
+
 
 # Final LM errors of the reference protocol. Kept as strings: the printed precision is the
 # tolerance of the match (see `matches_reference`).
@@ -172,13 +174,7 @@ def load_g2o(path: str | os.PathLike[str]) -> LoadedGraph:
             "this baseline needs VERTEX lines"
         )
 
-    first = min(known)
-    if is_3d:
-        noise = gtsam.noiseModel.Isotropic.Sigma(6, PRIOR_SIGMA)
-        graph.add(gtsam.PriorFactorPose3(first, initial.atPose3(first), noise))
-    else:
-        noise = gtsam.noiseModel.Isotropic.Sigma(3, PRIOR_SIGMA)
-        graph.add(gtsam.PriorFactorPose2(first, initial.atPose2(first), noise))
+    add_gtsam_reference_prior(graph, initial, min(known), is_3d)
     return LoadedGraph(
         path=str(path),
         is_3d=is_3d,
@@ -488,7 +484,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(format_lm_table(rows))
     print(
         f"\nLM: relativeErrorTol={args.tol:g}, absoluteErrorTol={args.tol:g}, maxIterations=1000, "
-        f"other GTSAM defaults; prior sigma {PRIOR_SIGMA:g} on the lowest id. "
+        f"other GTSAM defaults; prior sigma {GTSAM_PRIOR_SIGMA:g} on the lowest id. "
         f"optimize (s): median of {max(1, args.repeat)} run(s)."
     )
     return 0 if all(isinstance(r, tuple) or r.matches is not False for r in rows) else 1

@@ -408,6 +408,18 @@ def gtsam_available() -> bool:
     return importlib.util.find_spec("gtsam") is not None
 
 
+def add_gtsam_reference_prior(factors: typing.Any, initial: typing.Any, key: int, is_3d: bool) -> None:
+    """Append the reference protocol's gauge to a GTSAM graph: a prior, sigma 1e-3 on every
+    component, holding pose `key` at its initial value (needs the `bench` extra's gtsam)."""
+    import gtsam
+
+    noise = gtsam.noiseModel.Isotropic.Sigma(6 if is_3d else 3, GTSAM_PRIOR_SIGMA)
+    if is_3d:
+        factors.add(gtsam.PriorFactorPose3(key, initial.atPose3(key), noise))
+    else:
+        factors.add(gtsam.PriorFactorPose2(key, initial.atPose2(key), noise))
+
+
 def _gtsam_solve(graph: PoseGraph, known_inliers: np.ndarray, method: str) -> tuple[np.ndarray, float, int]:
     """Solve with GTSAM (child process only): `(poses (N, P), optimize() seconds, iterations or -1)`."""
     import gtsam  # the optional `bench` extra; imported only here, in the child
@@ -422,13 +434,7 @@ def _gtsam_solve(graph: PoseGraph, known_inliers: np.ndarray, method: str) -> tu
     if factors.size() != graph.num_edges:
         raise EgncError(f"gtsam.readG2o read {factors.size()} of {graph.num_edges} edges")
     fixed = np.flatnonzero(graph.fixed)
-    key = int(graph.vertex_ids[fixed[0] if len(fixed) else 0])
-    d = graph.tangent_dim
-    noise = gtsam.noiseModel.Isotropic.Sigma(d, GTSAM_PRIOR_SIGMA)
-    if is_3d:
-        factors.add(gtsam.PriorFactorPose3(key, initial.atPose3(key), noise))
-    else:
-        factors.add(gtsam.PriorFactorPose2(key, initial.atPose2(key), noise))
+    add_gtsam_reference_prior(factors, initial, int(graph.vertex_ids[fixed[0] if len(fixed) else 0]), is_3d)
     optimizer: typing.Any  # LevenbergMarquardtOptimizer or GncLMOptimizer; only the first has iterations()
     if method == "gtsam-lm":
         params = gtsam.LevenbergMarquardtParams()
