@@ -6,7 +6,7 @@ hits all three alike): egnc with CHOLMOD, egnc with SciPy's SuperLU, and GTSAM 4
 
 - "solve": egnc's `solve(graph, "l2")` on an already-read graph (problem set-up, symbolic
   analysis and the GN/LM loop) vs GTSAM's `optimize()` alone (the graph already read).
-- "CLI": the whole command, reading included: `egnc.cli.main([file, "--method", "l2", ...])`
+- "CLI": the whole command, reading included: `egnc.cli.solve.main([file, "--method", "l2", ...])`
   in-process vs `gtsam.readG2o` + the reference prior + `optimize()`. Interpreter start-up and
   imports are excluded for both.
 - Per iteration: the solver's phase clocks (`SolverResult.timings`) divided by the accepted
@@ -43,7 +43,8 @@ import scipy.sparse as sp
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from gtsam_baseline import dataset_path, g2o_is_3d, lm_params  # noqa: E402
 
-from egnc import cli, solve  # noqa: E402
+from egnc import solve  # noqa: E402
+from egnc.cli import solve as cli  # noqa: E402
 from egnc.bench import add_gtsam_reference_prior  # noqa: E402
 from egnc.factors import to_matrices  # noqa: E402
 from egnc.io import read_g2o  # noqa: E402

@@ -125,7 +125,7 @@ def test_tiny_grid_writes_csv_and_markdown(tmp_path):
 
 
 def test_cli_runs_the_grid_quietly_and_reports_usage_errors(tmp_path):
-    command = [sys.executable, "-m", "egnc.bench_cli"]
+    command = [sys.executable, "-m", "egnc.cli.bench"]
     run = subprocess.run(
         [*command, "--datasets", "grid2d", "--data-dir", DATASETS, "--percent", "10", "--seeds", "3",
          "--methods", "egnc[threshold=distance]", "--out", tmp_path / "out", "-q"],

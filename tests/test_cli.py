@@ -29,9 +29,9 @@ STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "st
 
 
 def egnc_solve(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    """Run `egnc-solve args...` with this interpreter, as `python -m egnc.cli`."""
+    """Run `egnc-solve args...` with this interpreter, as `python -m egnc.cli.solve`."""
     return subprocess.run(
-        [sys.executable, "-m", "egnc.cli", *map(str, args)],
+        [sys.executable, "-m", "egnc.cli.solve", *map(str, args)],
         cwd=cwd,
         capture_output=True,
         text=True,

@@ -16,9 +16,9 @@ GRID2D = DATASETS / "grid2d.g2o"
 
 
 def egnc_corrupt(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    """Run `egnc-corrupt args...` with this interpreter, as `python -m egnc.corrupt_cli`."""
+    """Run `egnc-corrupt args...` with this interpreter, as `python -m egnc.cli.corrupt`."""
     return subprocess.run(
-        [sys.executable, "-m", "egnc.corrupt_cli", *map(str, args)],
+        [sys.executable, "-m", "egnc.cli.corrupt", *map(str, args)],
         cwd=cwd,
         capture_output=True,
         text=True,

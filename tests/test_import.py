@@ -63,7 +63,7 @@ def test_asking_for_cholmod_without_scikit_sparse_is_one_clear_error():
     run = run_without_optional(
         f"""
         import sys
-        from egnc.cli import main
+        from egnc.cli.solve import main
 
         sys.exit(main([{str(grid2d)!r}, "--method", "l2", "--linear-solver", "cholmod"]))
         """

@@ -183,7 +183,7 @@ def test_save_figure_writes_png_atomically(mpl, tmp_path):
 def test_cli_plot_writes_png(mpl, tmp_path):
     out = tmp_path / "trajectory.png"
     run = subprocess.run(
-        [sys.executable, "-m", "egnc.cli", str(DATASETS / "grid2d_outliers.g2o"), "--plot", str(out), "-q"],
+        [sys.executable, "-m", "egnc.cli.solve", str(DATASETS / "grid2d_outliers.g2o"), "--plot", str(out), "-q"],
         capture_output=True,
         check=False,
         text=True,
@@ -234,13 +234,13 @@ def test_cli_plot_without_matplotlib_fails_in_one_line_before_solving(tmp_path):
         """
         import sys
         sys.modules["matplotlib"] = None
-        import egnc.cli
+        import egnc.cli.solve as cli
 
         def tripwire(*args, **kwargs):
             raise SystemExit("solve was called")
 
-        egnc.cli.solve = tripwire
-        sys.exit(egnc.cli.main(sys.argv[1:]))
+        cli.solve = tripwire
+        sys.exit(cli.main(sys.argv[1:]))
         """
     )
     out = tmp_path / "solved.g2o"
