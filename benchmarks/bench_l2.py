@@ -44,8 +44,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from gtsam_baseline import dataset_path, g2o_is_3d, lm_params  # noqa: E402
 
 from egnc import solve  # noqa: E402
-from egnc.cli import solve as cli  # noqa: E402
 from egnc.bench import add_gtsam_reference_prior  # noqa: E402
+from egnc.cli import solve as cli  # noqa: E402
 from egnc.factors import to_matrices  # noqa: E402
 from egnc.io import read_g2o  # noqa: E402
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares  # noqa: E402
