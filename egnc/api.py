@@ -20,7 +20,7 @@ from egnc.gnc import (
 )
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
-from egnc.least_squares import SolverOptions
+from egnc.least_squares import IterationCallback, SolverOptions
 from egnc.linear_solvers import resolve_name
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 
@@ -52,6 +52,8 @@ class Result:
         message: termination reason.
         time_s: wall time in seconds, from graph to result.
         timings: seconds per solver phase, summed over stages.
+        warnings: one sentence per thing the user should check before trusting the result
+            (a stage stopped at its iteration limit, most loop closures rejected, ...).
     """
 
     graph: PoseGraph
@@ -70,6 +72,7 @@ class Result:
     message: str
     time_s: float
     timings: dict[str, float]
+    warnings: tuple[str, ...] = ()
 
     @property
     def converged(self) -> bool:
@@ -91,6 +94,7 @@ def solve(
     options: SolverOptions | None = None,
     gnc_options: GncOptions | None = None,
     on_stage: StageCallback | None = None,
+    on_iteration: IterationCallback | None = None,
 ) -> Result:
     """Optimize a pose graph, rejecting false loop closures with a robust method.
 
@@ -106,6 +110,8 @@ def solve(
         gnc_options: kernel shape, threshold convention, outlier quantile, stage limit.
         on_stage: called with each `StageReport` as soon as its stage ends (e.g. to show
             progress); the refinement rounds of graduated methods are stages too.
+        on_iteration: called with `(iterations, cost)` after each accepted solver step of the
+            running stage (live progress on long solves).
 
     Returns:
         The `Result`, whose `graph` holds the optimized poses.
@@ -126,10 +132,12 @@ def solve(
     if refine:  # the refinement converges tightly; the stages need not
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, gnc_options.stage_rel_cost_tol))
     schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
-    outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend, on_stage)
+    outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend, on_stage, on_iteration)
     poses, stages = outcome.poses, outcome.stages
     if refine:
-        poses, inliers, refinements = refine_on_inliers(graph, poses, robust, options, gnc_options, backend, on_stage)
+        poses, inliers, refinements = refine_on_inliers(
+            graph, poses, robust, options, gnc_options, backend, on_stage, on_iteration
+        )
         stages += refinements
     r = factors.whitened_norms(factors.residuals(poses))
     if not refine:

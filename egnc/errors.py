@@ -31,3 +31,7 @@ class GraphError(EgncError):
 
 class SolverError(EgncError):
     """The solver could not proceed (e.g. the linear system is singular)."""
+
+
+class NumericalError(SolverError):
+    """The problem cannot be represented in double precision, or the solve produced non-finite numbers."""

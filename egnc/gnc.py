@@ -26,7 +26,7 @@ from egnc.connectivity import connected_components
 from egnc.errors import EgncError
 from egnc.factors import BetweenFactors
 from egnc.graph import PoseGraph
-from egnc.least_squares import Problem, SolverOptions, solve_least_squares
+from egnc.least_squares import IterationCallback, Problem, SolverOptions, solve_least_squares
 from egnc.schedules import Schedule, Stage, ThresholdConvention, exceeds
 
 
@@ -175,6 +175,7 @@ def run_gnc(
     gnc_options: GncOptions,
     linear_solver: str,
     on_stage: StageCallback | None = None,
+    on_iteration: IterationCallback | None = None,
 ) -> GncOutcome:
     """Run `schedule`'s stages on `graph` from `initial_poses` `(N, n, n)`.
 
@@ -191,6 +192,7 @@ def run_gnc(
         gnc_options: stage limit and pruning weight.
         linear_solver: resolved backend name, `"cholmod"` or `"scipy"`.
         on_stage: called with each `StageReport` as soon as its stage ends (progress display).
+        on_iteration: called with `(iterations, cost)` after each accepted step of a stage.
     """
     factors = BetweenFactors.from_graph(graph)
     active = np.ones(graph.num_edges, dtype=bool)
@@ -208,7 +210,7 @@ def run_gnc(
             break
         started = time.perf_counter()
         start = poses if gnc_options.warm_start else initial_poses
-        solution = solve_least_squares(problem, start, stage.loss.subset(active), solver_options)
+        solution = solve_least_squares(problem, start, stage.loss.subset(active), solver_options, on_iteration)
         poses = solution.poses
         r = factors.whitened_norms(factors.residuals(poses))
         reports.append(
@@ -267,6 +269,7 @@ def refine_on_inliers(
     gnc_options: GncOptions,
     linear_solver: str,
     on_stage: StageCallback | None = None,
+    on_iteration: IterationCallback | None = None,
 ) -> tuple[np.ndarray, np.ndarray, tuple[StageReport, ...]]:
     """Classify, re-solve least squares on the inliers, and repeat until the classification holds.
 
@@ -287,7 +290,7 @@ def refine_on_inliers(
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != 1:
             break
         problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver)
-        refined = solve_least_squares(problem, poses, None, solver_options)
+        refined = solve_least_squares(problem, poses, None, solver_options, on_iteration)
         poses = refined.poses
         reports.append(
             StageReport(

@@ -31,6 +31,7 @@ References:
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
@@ -50,6 +51,9 @@ STATUS_MESSAGES = {
     4: "stopped: no step decreases the cost",
 }
 CONVERGED = (1, 2, 3)
+
+IterationCallback = Callable[[int, float], None]
+"""Receives `(iterations, cost)` after each accepted step of a solve (progress display)."""
 DAMPING_MIN_FACTOR = 0.1  # largest shrink of lambda per accepted step, as GTSAM's factor 10
 
 
@@ -211,6 +215,7 @@ def solve_least_squares(
     initial_poses: np.ndarray,
     loss: EdgeLoss | None = None,
     options: SolverOptions = SolverOptions(),
+    on_iteration: IterationCallback | None = None,
 ) -> SolverResult:
     """Minimize `sum rho(r_e)` over the free poses by GN or LM with IRLS weights.
 
@@ -219,6 +224,7 @@ def solve_least_squares(
         initial_poses: `(N, n, n)` starting pose matrices.
         loss: per-edge cost and weight; `None` means plain least squares.
         options: solver options.
+        on_iteration: called with `(iterations, cost)` after each accepted step.
 
     Returns:
         The `SolverResult`; it is returned (not raised) when the iteration limit is hit.
@@ -297,6 +303,8 @@ def solve_least_squares(
         data = gradient = None
         history.append(cost)
         iterations += 1
+        if on_iteration is not None:
+            on_iteration(iterations, cost)
         if previous - cost <= options.rel_cost_tol * previous:
             status = 1
             break
