@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from egnc.decision import decide_outliers
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
     GncOptions,
@@ -15,7 +16,6 @@ from egnc.gnc import (
     StageReport,
     classify_inliers,
     known_inlier_mask,
-    refine_on_inliers,
     run_gnc,
 )
 from egnc.graph import PoseGraph
@@ -135,7 +135,7 @@ def solve(
     outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend, on_stage, on_iteration)
     poses, stages = outcome.poses, outcome.stages
     if refine:
-        poses, inliers, refinements = refine_on_inliers(
+        poses, inliers, refinements = decide_outliers(
             graph, poses, robust, options, gnc_options, backend, on_stage, on_iteration
         )
         stages += refinements

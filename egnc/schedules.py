@@ -35,10 +35,9 @@ from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
 import numpy as np
-from scipy.stats import chi2
 
 from egnc.errors import EgncError
-from egnc.kernels import Kernel, gnc_barc2, make_kernel
+from egnc.kernels import Kernel, chi2_quantile, gnc_barc2, make_kernel
 from egnc.losses import FixedWeightLoss, KernelLoss
 from egnc.mu_star import mu_star
 
@@ -76,7 +75,7 @@ def exceeds(r: np.ndarray, quantile: float, d: int, convention: ThresholdConvent
 
     `"squared"` tests `r^2 > chi2.ppf(quantile, d)`; `"distance"` tests `r > chi2.ppf(quantile, d)`.
     """
-    threshold = chi2.ppf(quantile, d)
+    threshold = chi2_quantile(quantile, d)
     return (r * r if convention == "squared" else r) > threshold
 
 

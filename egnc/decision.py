@@ -1,0 +1,172 @@
+"""The final outlier decision of the graduated methods: refine, re-test, re-admit.
+
+GNC ends at a robust (Geman-McClure) optimum, where a loop closure's residual says how well it
+fits a map from which the kernel had already down-weighted it. Deciding there rejects honest
+loops: with few loops, or loops that support each other, the robust optimum lets them go and
+bends the odometry back, and their residuals grow past any threshold (MIT, smallGrid3D).
+So the decision is made on least-squares maps instead, in rounds:
+
+1. Solve least squares on the accepted edges (warm-started; the map the accepted measurements
+   imply).
+2. An accepted loop closure whose squared whitened residual `r^2` exceeds `chi2.ppf(q, d)` is
+   rejected: it disagrees with the map even though it helped shape it.
+3. A rejected loop closure is re-admitted when its innovation statistic
+   `e^T (Omega^-1 + A H^-1 A^T)^-1 e <= chi2.ppf(q, d)` (`egnc.marginals`): the map built
+   without it predicts its measurement within the combined uncertainty of both. Its residual
+   alone (`r^2`) would ignore how uncertain the relative pose of two far-apart poses is.
+4. Repeat until the classification holds (or `MAX_ROUNDS`).
+
+Both tests have false-alarm rate `1 - q` per honest loop under the linear-Gaussian model
+(the included loop's `r^2` is stochastically smaller than the leave-one-out statistic).
+
+Rejected loops are tested in order of increasing `r^2`, in batches of `READMIT_BATCH`; testing
+stops at the first batch in which none passes, so a graph with thousands of gross false loops
+pays for one or two batches of marginal covariances, not thousands.
+
+References:
+    M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data
+    association", RAS 2009 (innovation gating with marginal covariances).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from egnc.connectivity import connected_components
+from egnc.factors import BetweenFactors
+from egnc.gnc import GncOptions, StageCallback, StageReport, classify_inliers
+from egnc.graph import PoseGraph
+from egnc.kernels import chi2_quantile
+from egnc.least_squares import IterationCallback, Problem, SolverOptions, solve_least_squares
+from egnc.marginals import innovations
+
+MAX_ROUNDS = 5
+"""Refine-and-decide rounds before the classification is taken as it stands."""
+
+READMIT_BATCH = 64
+"""Rejected loops whose innovation statistics are computed together (one multi-column solve)."""
+
+
+def readmitted(
+    problem: Problem, poses: np.ndarray, graph: PoseGraph, rejected: np.ndarray, r: np.ndarray, quantile: float
+) -> np.ndarray:
+    """`(E,)` bool: the `rejected` edges that the map of `problem` agrees with, as a group.
+
+    Args:
+        problem: least squares of the accepted edges, solved at `poses` `(N, n, n)`.
+        poses: the solution.
+        graph: the whole graph.
+        rejected: `(E,)` bool, edges left out of `problem`.
+        r: `(E,)` whitened residual norms at `poses`, to order the candidates.
+        quantile: chi-square quantile of the test.
+    """
+    threshold = chi2_quantile(quantile, graph.tangent_dim)
+    candidates = np.flatnonzero(rejected)
+    candidates = candidates[np.argsort(r[candidates], kind="stable")]
+    passed = np.zeros(graph.num_edges, dtype=bool)
+    for start in range(0, len(candidates), READMIT_BATCH):
+        batch = np.sort(candidates[start : start + READMIT_BATCH])  # the edge order subgraph_edges keeps
+        loops = BetweenFactors.from_graph(graph.subgraph_edges(_mask(graph.num_edges, batch)))
+        ok = sequentially_consistent(*innovations(problem, poses, loops), threshold)
+        if not ok.any():
+            break
+        passed[batch[ok]] = True
+    return passed
+
+
+def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> np.ndarray:
+    """`(K,)` bool: loops admitted one at a time while each agrees with the map and those before it.
+
+    Loops are visited by increasing innovation statistic `e_k^T S_kk^-1 e_k`; loop `k` is admitted
+    when its innovation conditioned on the loops admitted so far is at most `threshold`. For a
+    Gaussian the conditional statistic is the increase of the joint one, `e_T^T S_TT^-1 e_T`, so a
+    group of loops that support each other is admitted even when each alone looks marginal, while
+    a false loop never hides among true ones (its own increase is what is tested).
+
+    Args:
+        e: `(K, d)` residuals of the candidate loops.
+        S: `(K d, K d)` their joint innovation covariance (`egnc.marginals.innovations`).
+        threshold: chi-square quantile for `d` degrees of freedom.
+    """
+    num_loops, d = e.shape
+    block = np.arange(num_loops)[:, None] * d + np.arange(d)
+    S_kk = S[block[:, :, None], block[:, None, :]]
+    alone = np.einsum("ki,ki->k", e, np.linalg.solve(S_kk, e[:, :, None])[:, :, 0])
+    admitted = np.zeros(num_loops, dtype=bool)
+    joint = 0.0
+    for k in np.argsort(alone, kind="stable"):  # at most READMIT_BATCH small dense solves
+        trial = admitted.copy()
+        trial[k] = True
+        rows = block[trial].ravel()
+        statistic = float(e[trial].ravel() @ np.linalg.solve(S[np.ix_(rows, rows)], e[trial].ravel()))
+        if statistic - joint <= threshold:
+            admitted, joint = trial, statistic
+    return admitted
+
+
+def _mask(size: int, indices: np.ndarray) -> np.ndarray:
+    mask = np.zeros(size, dtype=bool)
+    mask[indices] = True
+    return mask
+
+
+def decide_outliers(
+    graph: PoseGraph,
+    poses: np.ndarray,
+    robust: np.ndarray,
+    solver_options: SolverOptions,
+    gnc_options: GncOptions,
+    linear_solver: str,
+    on_stage: StageCallback | None = None,
+    on_iteration: IterationCallback | None = None,
+) -> tuple[np.ndarray, np.ndarray, tuple[StageReport, ...]]:
+    """Classify at the GNC solution, then refine on the inliers and re-decide until it holds.
+
+    Args:
+        graph: the pose graph.
+        poses: `(N, n, n)` the last GNC stage's solution.
+        robust: `(E,)` bool, the loop closures that may be rejected.
+        solver_options: options of each least-squares refinement.
+        gnc_options: `outlier_quantile` and `readmit`.
+        linear_solver: resolved backend name.
+        on_stage, on_iteration: progress callbacks; each round is reported as a stage.
+
+    Returns:
+        `(poses, inliers, reports)`: refined `(N, n, n)` poses, `(E,)` inlier flags consistent
+        with them (unless `MAX_ROUNDS` was hit), and one `StageReport` per round.
+    """
+    factors = BetweenFactors.from_graph(graph)
+    d = graph.tangent_dim
+    inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
+    reports: list[StageReport] = []
+    for _ in range(MAX_ROUNDS):
+        if connected_components(graph.num_poses, graph.edges[inliers])[0] != 1:
+            break
+        started = time.perf_counter()
+        problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver)
+        refined = solve_least_squares(problem, poses, None, solver_options, on_iteration)
+        poses = refined.poses
+        r = factors.whitened_norms(factors.residuals(poses))
+        decided = classify_inliers(r, robust, d, gnc_options)
+        if gnc_options.readmit:
+            decided = (decided & inliers) | readmitted(problem, poses, graph, ~inliers, r, gnc_options.readmit_quantile)
+        reports.append(
+            StageReport(
+                np.nan,
+                np.nan,
+                np.nan,
+                refined.iterations,
+                refined.cost,
+                time.perf_counter() - started,
+                refined.status,
+                int(inliers.sum()),
+            )
+        )
+        if on_stage is not None:
+            on_stage(reports[-1])
+        if np.array_equal(decided, inliers):
+            break
+        inliers = decided
+    return poses, inliers, tuple(reports)

@@ -1,0 +1,109 @@
+"""Marginal covariances of poses and of loop-closure predictions, from the least-squares information.
+
+At a least-squares solution the Gauss-Newton information of the free pose steps is
+`H = sum_e J_e^T Omega_e J_e`, and `H^-1` is their covariance (the Laplace approximation GTSAM's
+`Marginals` uses). Poses held fixed (the gauge) have none: covariances are relative to them.
+
+For a loop closure `(i, j)` that is *not* in `H`, its residual `e` predicted by the rest of the
+graph has covariance `S = Omega^-1 + A H^-1 A^T`, with `A = [J_e_xi | J_e_xj]` the residual's
+Jacobian. Then `e^T S^-1 e` (the innovation statistic) is chi-square with `d` degrees of freedom
+when the loop agrees with the map; for a linear model it is also twice the least-squares cost the
+loop would add. This is the re-admission test of `egnc.gnc`.
+
+Every query needs `A H^-1 A^T`, a `d x d` block: it is read off `H^-1 B` for a right-hand side `B`
+holding `A^T` in the rows of the two poses, solved for many queries at once with one
+factorization (a few thousand columns per call, to bound memory).
+
+References:
+    M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data
+    association", RAS 2009 (marginals of selected poses and of data-association candidates).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from egnc.factors import BetweenFactors
+from egnc.least_squares import Problem
+
+_MAX_RHS_VALUES = 2**24
+"""Largest `n x columns` right-hand side solved at once (128 MiB of float64)."""
+
+
+def information_data(problem: Problem, poses: np.ndarray) -> np.ndarray:
+    """CSC values `(nnz,)` of the unweighted information `H` of `problem` at `poses` `(N, n, n)`."""
+    factors = problem.factors
+    linearization = factors.linearize(poses)
+    data, _ = problem.pattern.assemble(linearization, factors.information, np.ones(len(factors.edges)))
+    return data
+
+
+def _transposed_jacobians(problem: Problem, rows: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """`(n, K d)` matrix `B` whose `k`-th group of `d` columns is `A_k^T`.
+
+    Args:
+        problem: gives the unknowns' layout.
+        rows: `(K, m)` pose rows each query depends on.
+        blocks: `(K, m, d, d)` the query's Jacobian block `A_k` for each of those poses (output by
+            pose tangent); blocks of fixed poses are dropped (they carry no unknowns).
+    """
+    free_index = problem.pattern.free_index
+    num_queries, d = len(rows), blocks.shape[-1]
+    B = np.zeros((problem.pattern.size, num_queries * d))
+    columns = np.arange(num_queries)[:, None] * d + np.arange(d)  # (K, d)
+    for side in range(rows.shape[1]):
+        var = free_index[rows[:, side]]
+        free = var >= 0
+        row_index = var[free, None] * d + np.arange(d)  # (K', d)
+        # B[row a of the pose block, column b of the query] = A[b, a]
+        B[row_index[:, :, None], columns[free][:, None, :]] = np.swapaxes(blocks[free, side], 1, 2)
+    return B
+
+
+def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """`(K, d, d)` marginal covariances of the right-perturbation tangents of pose `rows` `(K,)`.
+
+    Tangent order `[v, omega]` (translation first), as the residuals; fixed poses get zeros.
+    Solved in groups of columns so that memory stays bounded for many poses.
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    d, n = problem.graph.tangent_dim, problem.pattern.size
+    out = np.zeros((len(rows), d, d))
+    if n == 0:
+        return out
+    data = information_data(problem, poses)
+    chunk = max(1, _MAX_RHS_VALUES // (n * d))
+    for start in range(0, len(rows), chunk):
+        part = rows[start : start + chunk, None]
+        B = _transposed_jacobians(problem, part, np.broadcast_to(np.eye(d), (len(part), 1, d, d)))
+        X = problem.linear_solver.solve(data, B)
+        # the k-th diagonal block of B^T X
+        Bk, Xk = (M.T.reshape(len(part), d, n) for M in (B, X))
+        out[start : start + len(part)] = Bk @ np.swapaxes(Xk, 1, 2)
+    return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+
+def innovations(problem: Problem, poses: np.ndarray, loops: BetweenFactors) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals of loop closures left out of `problem` and their joint predicted covariance.
+
+    Args:
+        problem: the least-squares problem of the accepted edges, at its solution `poses`.
+        poses: `(N, n, n)` the solution.
+        loops: `K` left-out loop closures (rows of the same poses); keep `K` small (the
+            covariance is dense).
+
+    Returns:
+        `(e, S)`: `(K, d)` residuals and `(K d, K d)` covariance `blockdiag(Omega^-1) + A H^-1 A^T`.
+    """
+    linearization = loops.linearize(poses)
+    e = linearization.residuals
+    d = e.shape[1]
+    S = np.zeros((e.size, e.size))
+    if problem.pattern.size and len(e):
+        blocks = np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
+        B = _transposed_jacobians(problem, loops.edges, blocks)
+        S = B.T @ problem.linear_solver.solve(information_data(problem, poses), B)
+        S = 0.5 * (S + S.T)
+    block = np.arange(len(e))[:, None] * d + np.arange(d)  # (K, d) rows of each loop
+    S[block[:, :, None], block[:, None, :]] += np.linalg.inv(loops.information)
+    return e, S
