@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from egnc.decision import decide_outliers
+from egnc.diagnostics import solve_warnings
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
     GncOptions,
@@ -20,7 +21,7 @@ from egnc.gnc import (
 )
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
-from egnc.least_squares import IterationCallback, SolverOptions
+from egnc.least_squares import STATUS_MESSAGES, IterationCallback, SolverOptions
 from egnc.linear_solvers import resolve_name
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 
@@ -35,7 +36,8 @@ class Result:
         graph: the input graph with optimized poses.
         method: the method used.
         linear_solver: the linear backend used, `"cholmod"` or `"scipy"`.
-        residual_norms: `(E,)` whitened residual norms `r` at the solution (never kernel-scaled).
+        residual_norms: `(E,)` whitened residual norms `r` at the solution (never kernel-scaled);
+            for graduated methods the solution is the least-squares optimum of the accepted edges.
         weights: `(E,)` IRLS weight of each edge at the end of the last GNC stage (1 for known
             inliers and least squares).
         mu: `(E,)` final kernel parameter of each edge (nan for known inliers and for kernels
@@ -48,10 +50,14 @@ class Result:
         iterations: accepted solver steps over all stages.
         stages: per-stage reports; with `GncOptions.refine`, the last one is the least-squares
             refinement on the accepted edges (its `mu` statistics are nan).
-        status: termination code of the last stage (1, 2, 3 mean converged).
+        status: termination code of the last solve (1, 2, 3 mean converged; see
+            `egnc.least_squares.STATUS_MESSAGES`).
         message: termination reason.
         time_s: wall time in seconds, from graph to result.
         timings: seconds per solver phase, summed over stages.
+        robust_residual_norms: `(E,)` `r` at the end of the last GNC stage, before the outlier
+            decision (the robust optimum; equal to `residual_norms` for single-stage methods).
+            With `residual_norms` it explains a rejection: a loop far off at both is false.
         warnings: one sentence per thing the user should check before trusting the result
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
     """
@@ -72,12 +78,22 @@ class Result:
     message: str
     time_s: float
     timings: dict[str, float]
+    robust_residual_norms: np.ndarray
     warnings: tuple[str, ...] = ()
+
+    def __repr__(self) -> str:
+        loops = int(np.count_nonzero(~self.known_inliers))
+        return (
+            f"Result(method={self.method!r}, poses={self.graph.num_poses}, edges={self.graph.num_edges},"
+            f" rejected={len(self.rejected_edges)} of {loops} loop closures, cost={self.cost:.6g},"
+            f" stages={len(self.stages)}, iterations={self.iterations}, status={self.status}"
+            f" ({self.message!r}), time_s={self.time_s:.3g}, warnings={len(self.warnings)})"
+        )
 
     @property
     def converged(self) -> bool:
-        """Whether the last stage stopped on a convergence criterion."""
-        return self.status in (1, 2, 3)
+        """Whether the last solve and every stage before it stopped on a convergence criterion."""
+        return self.status in (1, 2, 3) and all(stage.status != 0 for stage in self.stages)
 
     @property
     def rejected_edges(self) -> np.ndarray:
@@ -134,16 +150,22 @@ def solve(
     schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
     outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend, on_stage, on_iteration)
     poses, stages = outcome.poses, outcome.stages
+    status, message = outcome.status, outcome.message
+    robust_r = factors.whitened_norms(factors.residuals(poses))
     if refine:
         poses, inliers, refinements = decide_outliers(
             graph, poses, robust, options, gnc_options, backend, on_stage, on_iteration
         )
         stages += refinements
+        if refinements:
+            status, message = refinements[-1].status, STATUS_MESSAGES[refinements[-1].status]
     r = factors.whitened_norms(factors.residuals(poses))
     if not refine:
         inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
+    result_poses = from_matrices(graph.dim, poses)
+    initial_fits = classify_inliers(initial_r, robust, graph.tangent_dim, gnc_options)
     return Result(
-        graph=graph.with_poses(from_matrices(graph.dim, poses)),
+        graph=graph.with_poses(result_poses),
         method=method,
         linear_solver=backend,
         residual_norms=r,
@@ -155,8 +177,10 @@ def solve(
         cost=float(0.5 * np.sum(r**2)),
         iterations=sum(stage.iterations for stage in stages),
         stages=stages,
-        status=outcome.status,
-        message=outcome.message,
+        status=status,
+        message=message,
         time_s=time.perf_counter() - started,
         timings=outcome.timings,
+        robust_residual_norms=robust_r,
+        warnings=solve_warnings(graph, stages, robust, inliers, initial_r, r, initial_fits, result_poses),
     )

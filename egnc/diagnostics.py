@@ -1,0 +1,77 @@
+"""Warnings about a finished solve: what a user should check before trusting the result.
+
+Each check is cheap and reads only what the solve already computed. The wording names the
+number behind the warning and, where there is one, what to try.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from egnc.gnc import StageReport
+from egnc.graph import PoseGraph
+from egnc.metrics import ate
+
+MOVED_FRACTION = 0.01
+"""A result "far" from a consistent initial guess: ATE above this fraction of the trajectory's extent."""
+
+
+def solve_warnings(
+    graph: PoseGraph,
+    stages: Sequence[StageReport],
+    robust: np.ndarray,
+    inliers: np.ndarray,
+    initial_r: np.ndarray,
+    final_r: np.ndarray,
+    initial_fits: np.ndarray,
+    result_poses: np.ndarray,
+) -> tuple[str, ...]:
+    """The warnings of one solve, in the order the checks run.
+
+    Args:
+        graph: the input graph (its poses are the initial guess).
+        stages: per-stage reports, decision rounds included.
+        robust: `(E,)` bool, loop closures that could be rejected.
+        inliers: `(E,)` bool, the final classification.
+        initial_r, final_r: `(E,)` whitened residual norms at the initial guess and the result.
+        initial_fits: `(E,)` bool, edges that pass the outlier test at the initial guess.
+        result_poses: `(N, P)` optimized poses in the graph's parametrization.
+    """
+    warnings = [
+        f"stage {k} stopped at its iteration limit ({stage.iterations} iterations): the result may not"
+        " have converged (raise --max-iters / SolverOptions.max_iterations)"
+        for k, stage in enumerate(stages, start=1)
+        if stage.status == 0
+    ]
+    num_loops = int(np.count_nonzero(robust))
+    num_rejected = int(np.count_nonzero(robust & ~inliers))
+    if num_rejected > 0.5 * num_loops:
+        warnings.append(
+            f"{num_rejected} of {num_loops} loop closures were rejected (more than half): either most are false,"
+            " or the information matrices are far too confident for this data, or the initial guess is poor"
+            " (compare with --method l2)"
+        )
+    initial_cost = 0.5 * float(np.sum(initial_r[inliers] ** 2))
+    final_cost = 0.5 * float(np.sum(final_r[inliers] ** 2))
+    if final_cost > initial_cost:
+        warnings.append(
+            f"the least-squares cost over the accepted edges rose from {initial_cost:.6g} at the initial guess"
+            f" to {final_cost:.6g}: the solve made the guess worse"
+        )
+    if num_loops and np.all(initial_fits[robust]):
+        extent = _extent(graph.poses, graph.dim)
+        moved = ate(result_poses, graph.poses, graph.dim)
+        if extent > 0 and moved > MOVED_FRACTION * extent:
+            warnings.append(
+                f"every loop closure fits the initial guess, yet the result moved {moved:.3g} m (ATE) from it,"
+                f" {100 * moved / extent:.1f}% of the trajectory's extent"
+            )
+    return tuple(warnings)
+
+
+def _extent(poses: np.ndarray, dim: int) -> float:
+    """Diagonal of the bounding box of the positions in `poses` `(N, P)`, in metres."""
+    positions = poses[:, :dim]
+    return float(np.linalg.norm(positions.max(axis=0) - positions.min(axis=0)))
