@@ -6,7 +6,7 @@ Public API: `solve` a pose graph (or a g2o file) into a `Result`; `read_g2o` / `
 
 from importlib.metadata import PackageNotFoundError, version
 
-from egnc.api import Result, StageReport, solve
+from egnc.api import Result, StageReport, marginal_covariances, solve
 from egnc.errors import EgncError, G2oFormatError, GraphError, SolverError
 from egnc.gnc import GncOptions
 from egnc.graph import PoseGraph
@@ -30,6 +30,7 @@ __all__ = [
     "SolverOptions",
     "StageReport",
     "__version__",
+    "marginal_covariances",
     "read_g2o",
     "solve",
     "write_g2o",

@@ -19,13 +19,15 @@ from egnc.gnc import (
     known_inlier_mask,
     run_gnc,
 )
+from egnc.errors import GraphError
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
-from egnc.least_squares import STATUS_MESSAGES, IterationCallback, SolverOptions
+from egnc.least_squares import STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
 from egnc.linear_solvers import resolve_name
+from egnc.marginals import pose_covariances
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 
-__all__ = ["METHODS", "Result", "StageReport", "solve"]
+__all__ = ["METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,3 +186,32 @@ def solve(
         robust_residual_norms=robust_r,
         warnings=solve_warnings(graph, stages, robust, inliers, initial_r, r, initial_fits, result_poses),
     )
+
+
+def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = None) -> np.ndarray:
+    """Marginal covariances of chosen poses of a solve, from the information of its accepted edges.
+
+    The Laplace approximation at the solution (as GTSAM's `Marginals`): the inverse of the
+    Gauss-Newton information of the accepted edges, relative to the poses held fixed.
+
+    Args:
+        result: a finished solve.
+        ids: vertex ids (as in the g2o file) of the poses wanted; None means every pose.
+
+    Returns:
+        `(K, d, d)` covariances of the right-perturbation tangent of each pose, order `[v, omega]`
+        (translation first; GTSAM's `Pose3` uses `[omega, v]`), in metres and radians squared.
+        Fixed poses get zeros.
+
+    Raises:
+        GraphError: an id is not a vertex of the graph.
+    """
+    graph = result.graph
+    ids = graph.vertex_ids if ids is None else np.asarray(ids, dtype=np.int64).reshape(-1)
+    rows = np.searchsorted(graph.vertex_ids, ids)
+    rows = np.minimum(rows, graph.num_poses - 1)
+    missing = ids[graph.vertex_ids[rows] != ids]
+    if len(missing):
+        raise GraphError(f"marginal_covariances: no vertex with id {missing[:5].tolist()}")
+    problem = Problem.from_graph(graph.subgraph_edges(result.inliers), result.linear_solver)
+    return pose_covariances(problem, to_matrices(graph.dim, graph.poses), rows)

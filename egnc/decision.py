@@ -81,9 +81,10 @@ def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> n
 
     Loops are visited by increasing innovation statistic `e_k^T S_kk^-1 e_k`; loop `k` is admitted
     when its innovation conditioned on the loops admitted so far is at most `threshold`. For a
-    Gaussian the conditional statistic is the increase of the joint one, `e_T^T S_TT^-1 e_T`, so a
-    group of loops that support each other is admitted even when each alone looks marginal, while
-    a false loop never hides among true ones (its own increase is what is tested).
+    Gaussian the conditional statistic is the increase of the joint one, `e_T^T S_TT^-1 e_T`, so
+    once one loop of a group that supports itself is in, the others are judged given it (they
+    add little), while a false loop never hides among true ones: its own increase is tested, not
+    a joint statistic diluted over many degrees of freedom.
 
     Args:
         e: `(K, d)` residuals of the candidate loops.

@@ -1,0 +1,165 @@
+"""The outlier decision: clean maps stay whole, re-admission, marginals, warnings, stage protocol."""
+
+from __future__ import annotations
+
+import tempfile
+
+import numpy as np
+import pytest
+
+import egnc
+from egnc.api import marginal_covariances, solve
+from egnc.datasets import add_false_loops, grid_world
+from egnc.decision import MAX_ROUNDS, sequentially_consistent
+from egnc.factors import BetweenFactors, to_matrices
+from egnc.gnc import GncOptions
+from egnc.kernels import chi2_quantile
+from egnc.least_squares import Problem, SolverOptions
+from egnc.linear_solvers import cholmod_available
+from egnc.marginals import innovations, pose_covariances
+
+
+OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False)
+"""The decision before re-admission: the Geman-McClure classification at chi2.ppf(0.95), re-checked by r^2."""
+
+
+def test_drifted_guess_with_few_loops_keeps_every_loop():
+    # The MIT pattern: heading noise makes the odometry guess drift, and the few loops have
+    # residuals in the hundreds there. The robust optimum lets some go; re-admission brings them back.
+    world = grid_world(2, 400, seed=5, loop_probability=0.03, odometry_sigma=(0.05, 0.02))
+    graph = world.graph
+    factors = BetweenFactors.from_graph(graph)
+    initial_r = factors.whitened_norms(factors.residuals(to_matrices(2, graph.poses)))
+    assert np.max(initial_r[graph.is_loop_closure] ** 2) > 100  # the guess is far off
+    assert len(solve(graph, gnc_options=OLD_RULE).rejected_edges) > 0  # the case the old rule failed
+    result = solve(graph)
+    assert len(result.rejected_edges) == 0
+    l2 = solve(graph, "l2")
+    assert result.cost <= l2.cost * (1 + 1e-9)
+    assert result.warnings == ()
+
+
+@pytest.mark.parametrize(("dim", "num_poses"), [(2, 10000), (3, 2000)])
+def test_honest_noise_rejects_fewer_than_one_percent_of_loops(dim, num_poses):
+    # Noise drawn exactly as the information matrices state: about 5% of the true loops exceed
+    # chi2.ppf(0.95, d) at the ground truth, and the old rule rejected 8% of them in 2D.
+    graph = grid_world(dim, num_poses, seed=1).graph
+    loops = int(graph.is_loop_closure.sum())
+    result = solve(graph)
+    assert len(result.rejected_edges) < 0.01 * loops
+
+
+def test_false_loops_stay_rejected_after_readmission():
+    world = grid_world(2, 300, seed=3, noise_scale=0.3)
+    clean = solve(world.graph, "l2")
+    corrupted = add_false_loops(world.graph, 50, seed=4, reference_poses=clean.graph.poses)
+    result = solve(corrupted.graph)
+    np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
+
+
+def test_a_stage_at_its_iteration_limit_is_a_warning_not_converged():
+    graph = grid_world(2, 300, seed=2, odometry_sigma=(0.05, 0.02)).graph
+    result = solve(graph, options=SolverOptions(max_iterations=2))
+    assert not result.converged
+    assert any("iteration limit" in warning for warning in result.warnings)
+    # no stage is run twice: at most the three EGNC stages and the decision rounds
+    assert len(result.stages) <= 3 + MAX_ROUNDS
+
+
+def test_most_loops_rejected_is_a_warning():
+    world = grid_world(2, 200, seed=6, noise_scale=0.3)
+    clean = solve(world.graph, "l2")
+    # 80% false loops: still rejected exactly, but the user is told most loops were dropped
+    corrupted = add_false_loops(world.graph, 80, seed=7, reference_poses=clean.graph.poses)
+    result = solve(corrupted.graph)
+    assert any("more than half" in warning for warning in result.warnings)
+
+
+def _dense_covariance(problem: Problem, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`H^-1` of the free pose tangents from a dense Jacobian, and each pose's block index."""
+    lin = problem.factors.linearize(poses)
+    d = lin.residuals.shape[1]
+    free_index = problem.pattern.free_index
+    J = np.zeros((len(lin.residuals) * d, problem.pattern.size))
+    for k, (i, j) in enumerate(problem.factors.edges):
+        for var, block in ((free_index[i], lin.J_e_xi[k]), (free_index[j], lin.J_e_xj[k])):
+            if var >= 0:
+                J[k * d : (k + 1) * d, var * d : (var + 1) * d] = block
+    W = np.zeros((J.shape[0], J.shape[0]))
+    for k, information in enumerate(problem.factors.information):
+        W[k * d : (k + 1) * d, k * d : (k + 1) * d] = information
+    return np.linalg.inv(J.T @ W @ J), free_index
+
+
+@pytest.mark.parametrize(
+    "backend",
+    ["scipy", pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse"))],
+)
+def test_innovations_and_pose_covariances_match_a_dense_inverse(backend):
+    world = grid_world(3, 40, seed=8, noise_scale=0.5)
+    graph = world.graph
+    loop_rows = np.flatnonzero(graph.is_loop_closure)[:3]
+    kept = np.ones(graph.num_edges, dtype=bool)
+    kept[loop_rows] = False
+    poses = to_matrices(3, solve(graph.subgraph_edges(kept), "l2").graph.poses)
+    problem = Problem.from_graph(graph.subgraph_edges(kept), backend)
+    covariance, free_index = _dense_covariance(problem, poses)
+    d = 6
+
+    rows = np.array([3, 17, 39])
+    blocks = pose_covariances(problem, poses, rows)
+    for k, row in enumerate(rows):
+        var = slice(free_index[row] * d, (free_index[row] + 1) * d)
+        np.testing.assert_allclose(blocks[k], covariance[var, var], rtol=1e-8, atol=1e-14)
+
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[loop_rows] = True
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    e, S = innovations(problem, poses, loops)
+    lin = loops.linearize(poses)
+    A = np.zeros((len(loop_rows) * d, problem.pattern.size))
+    for k, (i, j) in enumerate(loops.edges):
+        for var, block in ((free_index[i], lin.J_e_xi[k]), (free_index[j], lin.J_e_xj[k])):
+            if var >= 0:
+                A[k * d : (k + 1) * d, var * d : (var + 1) * d] = block
+    expected = A @ covariance @ A.T
+    for k, information in enumerate(loops.information):
+        expected[k * d : (k + 1) * d, k * d : (k + 1) * d] += np.linalg.inv(information)
+    np.testing.assert_allclose(S, expected, rtol=1e-8, atol=1e-14)
+    np.testing.assert_allclose(e, lin.residuals)
+
+
+def test_sequential_consistency_admits_supporting_groups_and_never_hides_a_false_loop():
+    d = 3
+    threshold = chi2_quantile(0.9999, d)
+    # Two loops that each look off alone (statistic 25 > 21.1) but are perfectly correlated:
+    # once one is in, the other adds nothing. A third, independent, is far off (100).
+    S = np.eye(3 * d)
+    S[0:d, d : 2 * d] = S[d : 2 * d, 0:d] = 0.999 * np.eye(d)
+    e = np.array([[5.0, 0, 0], [5.0, 0, 0], [10.0, 0, 0]])
+    assert e[0] @ e[0] > threshold
+    admitted = sequentially_consistent(e, S, threshold)
+    np.testing.assert_array_equal(admitted, [False, False, False])  # the first alone already fails
+    e[0, 0] = e[1, 0] = 4.0  # 16 alone: admitted; the twin adds ~0 given it
+    np.testing.assert_array_equal(sequentially_consistent(e, S, threshold), [True, True, False])
+
+
+def test_marginal_covariances_match_gtsam_marginals(dataset_path):
+    gtsam = pytest.importorskip("gtsam")
+    path = dataset_path("tinyGrid3D.g2o")
+    result = solve(path, "l2")
+    ids = [1, 4, 8]
+    ours = marginal_covariances(result, ids)
+    with tempfile.TemporaryDirectory() as folder:
+        solved = f"{folder}/solved.g2o"
+        egnc.write_g2o(result.graph, solved)
+        graph, values = gtsam.readG2o(solved, True)
+    graph.add(gtsam.PriorFactorPose3(0, values.atPose3(0), gtsam.noiseModel.Isotropic.Sigma(6, 1e-9)))
+    marginals = gtsam.Marginals(graph, values)
+    swap = np.r_[3:6, 0:3]  # GTSAM's Pose3 tangent is [omega, v]
+    for k, vertex in enumerate(ids):
+        reference = marginals.marginalCovariance(vertex)[np.ix_(swap, swap)]
+        np.testing.assert_allclose(ours[k], reference, rtol=1e-6, atol=1e-12 * np.abs(reference).max())
+    assert np.all(marginal_covariances(result, [0]) == 0)  # the gauge pose is fixed
+    with pytest.raises(egnc.GraphError, match="no vertex with id"):
+        marginal_covariances(result, [99])
