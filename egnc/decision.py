@@ -40,6 +40,7 @@ from egnc.gnc import GncOptions, StageCallback, StageReport, classify_inliers
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
 from egnc.least_squares import IterationCallback, Problem, SolverOptions, solve_least_squares
+from egnc.linear_solvers import NotPositiveDefiniteError
 from egnc.marginals import innovations
 
 MAX_ROUNDS = 5
@@ -69,7 +70,10 @@ def readmitted(
     for start in range(0, len(candidates), READMIT_BATCH):
         batch = np.sort(candidates[start : start + READMIT_BATCH])  # the edge order subgraph_edges keeps
         loops = BetweenFactors.from_graph(graph.subgraph_edges(_mask(graph.num_edges, batch)))
-        ok = sequentially_consistent(*innovations(problem, poses, loops), threshold)
+        try:
+            ok = sequentially_consistent(*innovations(problem, poses, loops), threshold)
+        except NotPositiveDefiniteError:  # no covariance at a degenerate solution: nothing to test against
+            break
         if not ok.any():
             break
         passed[batch[ok]] = True
