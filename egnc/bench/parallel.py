@@ -30,9 +30,6 @@ __all__ = ["DaskPool", "LocalPool", "Pool", "open_pool"]
 DASK_INSTALL_HINT = "pip install 'egnc[dask]'"
 """How to get dask.distributed; quoted in the error raised without it."""
 
-DASK_CONNECT_TIMEOUT_S = 30.0
-"""Seconds to wait for the Dask scheduler to answer before giving up."""
-
 
 class Pool(Protocol):
     """Something that runs calls in child processes and yields their outcomes as they finish."""
@@ -82,7 +79,8 @@ class DaskPool:
         except ImportError:
             raise EgncError(f"a Dask cluster needs dask.distributed, not installed: {DASK_INSTALL_HINT}") from None
         try:
-            self.client = Client(address, timeout=DASK_CONNECT_TIMEOUT_S, set_as_default=False)
+            # Waits for the scheduler as long as Dask's `distributed.comm.timeouts.connect` (30 s by default).
+            self.client = Client(address, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as error:
             raise EgncError(f"cannot connect to the Dask scheduler at {address}: {error}") from None
 
@@ -97,7 +95,7 @@ class DaskPool:
 
         pending = iter(calls)
         submitted: dict[Hashable, tuple[Hashable, typing.Any]] = {}  # future key -> (call key, future)
-        finished = as_completed()
+        finished = as_completed(loop=self.client.loop)
         window = max(2, 2 * sum(self.client.nthreads().values()))
 
         def submit_next() -> None:
