@@ -142,7 +142,8 @@ def run_irl(
             percent = irl_outlier_percent(log)
             runs = ((RunRecord(name, percent, None, spec.label, reference), spec) for spec in specs)
         else:
-            runs = ((irl_case(name, log, reference), spec) for spec in specs)
+            case = irl_case(name, log, reference)
+            runs = ((case, spec) for spec in specs)
         return _run_all(pool, runs, counter, time_limit_s, linear_solver)
 
 
