@@ -7,7 +7,10 @@ is killed and reported as "timeout". The parent never solves anything itself, so
 a numerical library is ever live in it at a fork.
 
 `os.fork` is used directly rather than `multiprocessing.Process`, because a Dask worker is a
-daemonic process and `multiprocessing` refuses to start children from one.
+daemonic process and `multiprocessing` refuses to start children from one. A Dask worker also
+runs threads of its own, and a lock one of them holds at the fork stays held in the child (Python
+3.12 and later warn about forking such a process); the child only runs its call, which takes none
+of Dask's locks, and leaves with `os._exit`.
 """
 
 from __future__ import annotations
