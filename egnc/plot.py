@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from mpl_toolkits.mplot3d import Axes3D
 
 __all__ = [
+    "crowd_style",
     "plot_kernel",
     "plot_mu_stages",
     "plot_mu_star",
@@ -200,9 +201,11 @@ def plot_trajectory(
 
 
 def crowd_style(count: int) -> dict[str, float]:
-    """Line width (points) and opacity for `count` loop-closure lines: 1 pt and 0.9 for a
-    dozen, then both falling with the count (`1/sqrt` for the opacity, `1/count^(1/4)` for the
-    width) to `CROWD_ALPHA`/`CROWD_WIDTH`'s floors (about a thousand lines for the opacity)."""
+    """Line width (points) and opacity for `count` loop-closure lines, as `plot` keywords.
+
+    1 pt and 0.9 up to 15 lines; beyond, the width falls as `2 / count^(1/4)` down to 0.3 pt
+    (from about 2000 lines) and the opacity as `3.5 / sqrt(count)` down to 0.12 (from about 850).
+    """
     count = max(count, 1)
     return {
         "linewidth": float(np.clip(2.0 / count**0.25, *CROWD_WIDTH)),
