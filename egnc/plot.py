@@ -1,12 +1,13 @@
 """Figures of a solve and of the SIG kernel, drawn with matplotlib (the `plot` extra).
 
 - `plot_trajectory`: the optimized trajectory (2D or 3D), optionally the initial guess and a
-  reference, with accepted and rejected loop closures in distinct styles.
+  reference, with accepted and rejected loop closures, each in its own colour, and a legend;
+  `size` (inches) for a new figure, equal scale on every axis (also in 3D).
 - `plot_mu_stages`: per-stage statistics of the kernel parameter `mu` and a histogram of the
   final per-factor `mu`.
 - `plot_kernel`: the SIG kernel `rho(r; mu)` and its second derivative for several `mu`.
 - `plot_mu_star`: the convexity boundary `mu*(r)` and its asymptote 1/2.
-- `save_figure`: write a figure atomically (the file is complete or not there).
+- `save_figure`: write a figure atomically (the file is complete or not there), at a chosen `dpi`.
 
 matplotlib is imported inside the functions, so `import egnc.plot` works without it; calling a
 plot function without it raises `EgncError` with the install command. The figures are plain
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
     from mpl_toolkits.mplot3d import Axes3D
 
 __all__ = [
+    "crowd_style",
     "plot_kernel",
     "plot_mu_stages",
     "plot_mu_star",
@@ -47,12 +49,21 @@ __all__ = [
 INSTALL_HINT = "pip install 'egnc[plot]'"
 """How to get matplotlib; quoted in the error raised without it."""
 
-# One palette for every figure, so a colour means the same thing everywhere.
+# One palette for every figure, so a colour means the same thing everywhere; each element of a
+# trajectory figure has its own: a dark blue result over a grey guess, green and red loops.
 RESULT_COLOR = "#1f3b73"
-INITIAL_COLOR = "0.7"
-REFERENCE_COLOR = "#2ca02c"
-ACCEPTED_COLOR = "#8fa8c8"
+INITIAL_COLOR = "0.6"
+REFERENCE_COLOR = "#9467bd"
+ACCEPTED_COLOR = "#009e73"
 REJECTED_COLOR = "#d62728"
+
+THREE_D_ZOOM = 1.15
+"""Scale of the 3D box in its axes: matplotlib's 1 leaves a wide empty margin; more cuts the labels."""
+
+CROWD_ALPHA = (0.12, 0.9)
+"""Opacity range of a set of loop-closure lines: opaque when few, down to the floor when many."""
+CROWD_WIDTH = (0.3, 1.0)
+"""Line width range in points of a set of loop-closure lines, thinner as they get more."""
 
 
 def require_matplotlib() -> None:
@@ -75,33 +86,44 @@ def plot_trajectory(
     inliers: np.ndarray | None = None,
     known_inliers: np.ndarray | None = None,
     ax: Axes | None = None,
+    size: tuple[float, float] | None = None,
 ) -> Figure:
     """Draw a trajectory with its loop closures: x-y for a 2D graph, x-y-z (3D axes) for a 3D one.
 
-    The trajectory is the line through the poses in id order. Loop closures (edges that are not
-    known inliers, odometry by default) are drawn between their poses on that trajectory:
-    accepted ones as thin grey-blue lines, rejected ones as red dashed lines.
+    The trajectory is the line through the poses in id order, in dark blue; the initial guess is
+    grey and a reference purple and dotted. Loop closures (edges that are not known inliers,
+    odometry by default) are drawn between their poses on that trajectory, accepted ones in green
+    and rejected ones in red-orange; the more there are of a kind, the thinner and more
+    translucent its lines (`crowd_style`), so hundreds of rejected loops do not hide the map. The
+    legend names each element with its count. Both kinds of axes have an equal scale on every
+    axis (in 3D, the box takes the data's proportions).
 
     Args:
         result_or_graph: a `Result` (its optimized graph, `inliers` and `known_inliers` are used,
             and its method and rejection count become the title) or a `PoseGraph`.
-        initial: the trajectory before optimization, drawn in light grey: a `PoseGraph` or its
+        initial: the trajectory before optimization, drawn in grey: a `PoseGraph` or its
             `(N, P)` poses (P = 3 in 2D, 7 in 3D), same rows as the graph.
-        reference: a reference trajectory (e.g. ground truth), drawn in green; same forms.
+        reference: a reference trajectory (e.g. ground truth), drawn in purple; same forms.
         inliers: `(E,)` bool, false for rejected edges; defaults to the result's (a bare graph has
             no rejected edges).
         known_inliers: `(E,)` bool, edges that are not drawn as loop closures; defaults to the
             result's, or to the graph's odometry.
         ax: draw here instead of in a new figure; must be a 3D axes (`projection="3d"`) for a
             3D graph and a 2D one for a 2D graph.
+        size: `(width, height)` of the new figure in inches; default `(6.4, 6.0)` in 2D and
+            `(7.0, 5.6)` in 3D. Not with `ax` (its figure has a size already).
 
     Returns:
         The `Figure` holding the axes.
 
     Raises:
-        EgncError: matplotlib is missing, or an argument has the wrong shape or axes type.
+        EgncError: matplotlib is missing, or an argument has the wrong shape, value or axes type.
     """
     require_matplotlib()
+    if size is not None:
+        if ax is not None:
+            raise EgncError("size sets the size of a new figure; it cannot be given with ax")
+        size = _figure_size(size)
     graph = result_or_graph if isinstance(result_or_graph, PoseGraph) else result_or_graph.graph
     result = None if isinstance(result_or_graph, PoseGraph) else result_or_graph
     n_edges = graph.num_edges
@@ -117,7 +139,8 @@ def plot_trajectory(
     rejected = candidates & ~inliers
 
     own_figure = ax is None
-    figure, ax = _single_axes(ax, three_d=graph.dim == 3, figsize=(7.0, 5.6) if graph.dim == 3 else (6.4, 6.0))
+    default_size = (7.0, 5.6) if graph.dim == 3 else (6.4, 6.0)
+    figure, ax = _single_axes(ax, three_d=graph.dim == 3, figsize=size or default_size)
     if (ax.name == "3d") != (graph.dim == 3):
         raise EgncError(f"a {graph.dim}D graph needs a {'3D' if graph.dim == 3 else '2D'} axes")
     position = _positions(graph, graph.poses, "result")
@@ -127,34 +150,22 @@ def plot_trajectory(
         ax,
         segments[accepted],
         color=ACCEPTED_COLOR,
-        linewidth=0.5,
         zorder=1,
         label=f"accepted loop closures ({int(accepted.sum())})" if result is not None else "loop closures",
+        **crowd_style(int(accepted.sum())),
     )
+    drawn = [position]
     if initial is not None:
-        _draw_path(
-            ax,
-            _positions(graph, initial, "initial"),
-            color=INITIAL_COLOR,
-            linewidth=0.8,
-            zorder=2,
-            label="initial guess",
-        )
+        drawn.append(_positions(graph, initial, "initial"))
+        _draw_path(ax, drawn[-1], color=INITIAL_COLOR, linewidth=0.8, zorder=2, label="initial guess")
     if reference is not None:
-        _draw_path(
-            ax,
-            _positions(graph, reference, "reference"),
-            color=REFERENCE_COLOR,
-            linewidth=1.0,
-            linestyle=":",
-            zorder=3,
-            label="reference",
-        )
+        drawn.append(_positions(graph, reference, "reference"))
+        _draw_path(ax, drawn[-1], color=REFERENCE_COLOR, linewidth=1.0, linestyle=":", zorder=3, label="reference")
     _draw_path(
         ax,
         position,
         color=RESULT_COLOR,
-        linewidth=1.0,
+        linewidth=1.1,
         zorder=4,
         label="result" if result is not None else "trajectory",
     )
@@ -163,10 +174,9 @@ def plot_trajectory(
             ax,
             segments[rejected],
             color=REJECTED_COLOR,
-            linewidth=0.7,
-            linestyle=(0, (4, 2)),
             zorder=5,
             label=f"rejected loop closures ({int(rejected.sum())})",
+            **crowd_style(int(rejected.sum())),
         )
 
     ax.set_xlabel("x [m]")
@@ -174,17 +184,33 @@ def plot_trajectory(
     if graph.dim == 3:
         ax3d = cast("Axes3D", ax)
         ax3d.set_zlabel("z [m]")
-        ax3d.set_box_aspect(None, zoom=0.9)  # room for the z label inside the figure
-        ax3d.set_aspect("equal")  # after the box: it widens the limits to fit the box
+        _equal_3d(ax3d, np.concatenate(drawn))
     else:
         ax.set_aspect("equal", adjustable="datalim")
     if result is not None and not ax.get_title():
         ax.set_title(f"{result.method}: rejected {int(rejected.sum())} of {int(candidates.sum())} loop closures")
     if own_figure:  # below the axes, off the trajectory
-        figure.legend(loc="outside lower center", ncol=2, fontsize="small", frameon=False)
+        legend = figure.legend(loc="outside lower center", ncol=2, fontsize="small", frameon=False)
     else:  # an explicit corner: "best" scans every segment, which is slow on large graphs
-        ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
+        legend = ax.legend(loc="upper right", fontsize="small", framealpha=0.9)
+    for handle in legend.legend_handles:  # the key shows the colour, however faint the lines
+        if handle is not None:
+            handle.set_alpha(1.0)
+            handle.set_linewidth(max(handle.get_linewidth(), 1.5))  # type: ignore[attr-defined]
     return figure
+
+
+def crowd_style(count: int) -> dict[str, float]:
+    """Line width (points) and opacity for `count` loop-closure lines, as `plot` keywords.
+
+    1 pt and 0.9 up to 15 lines; beyond, the width falls as `2 / count^(1/4)` down to 0.3 pt
+    (from about 2000 lines) and the opacity as `3.5 / sqrt(count)` down to 0.12 (from about 850).
+    """
+    count = max(count, 1)
+    return {
+        "linewidth": float(np.clip(2.0 / count**0.25, *CROWD_WIDTH)),
+        "alpha": float(np.clip(3.5 / math.sqrt(count), *CROWD_ALPHA)),
+    }
 
 
 def plot_mu_stages(result: Result, *, axes: Sequence[Axes] | None = None) -> Figure:
@@ -404,9 +430,11 @@ def save_figure(figure: Figure, path: str | Path, *, dpi: float = 100) -> Path:
         `path` as a `Path`.
 
     Raises:
-        EgncError: matplotlib is missing, the format is unknown, or the file cannot be written.
+        EgncError: matplotlib is missing, `dpi` is not positive, the format is unknown, or the file
+            cannot be written.
     """
     require_matplotlib()
+    dpi = _positive_finite("dpi", dpi)
     path = Path(path)
     file_format = path.suffix[1:].lower() or "png"
     supported = figure.canvas.get_supported_filetypes()
@@ -466,6 +494,28 @@ def _edge_mask(name: str, mask: np.ndarray, n_edges: int) -> np.ndarray:
     if mask.shape != (n_edges,) or mask.dtype != bool:
         raise EgncError(f"{name} must be an ({n_edges},) bool array, got {mask.dtype} of shape {mask.shape}")
     return mask
+
+
+def _figure_size(size: tuple[float, float]) -> tuple[float, float]:
+    """Validate a `(width, height)` in inches."""
+    try:
+        width, height = size
+    except (TypeError, ValueError):
+        raise EgncError(f"size must be (width, height) in inches, got {size!r}") from None
+    return _positive_finite("width", width), _positive_finite("height", height)
+
+
+def _equal_3d(ax: Axes3D, points: np.ndarray) -> None:
+    """One metre is as long on every axis: limits around `(K, 3)` points, and a box with their
+    proportions (an extent below 5 % of the largest is raised to it, so flat data stays visible)."""
+    low, high = points.min(axis=0), points.max(axis=0)
+    extent = high - low
+    extent = np.maximum(extent, 0.05 * extent.max() if extent.max() > 0 else 1.0)
+    center = (low + high) / 2
+    margin = 1.02  # the lines at the edges stay inside the box
+    for set_limits, c, e in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), center, extent):
+        set_limits(c - margin * e / 2, c + margin * e / 2)
+    ax.set_box_aspect(tuple(extent), zoom=THREE_D_ZOOM)
 
 
 def _positive_finite(name: str, value: float) -> float:

@@ -50,13 +50,14 @@ def test_method_specs_with_options():
 
 
 def test_option_values_follow_the_field_types():
-    assert bench._convert("none", int | None, "x") is None
-    assert bench._convert("7", int | None, "x") == 7
-    assert bench._convert("yes", bool, "x") is True
+    convert = bench.methods._convert
+    assert convert("none", int | None, "x") is None
+    assert convert("7", int | None, "x") == 7
+    assert convert("yes", bool, "x") is True
     with pytest.raises(EgncError, match="x: 'maybe' is not a valid bool"):
-        bench._convert("maybe", bool, "x")
+        convert("maybe", bool, "x")
     with pytest.raises(EgncError, match="is not a valid int or none"):
-        bench._convert("1.5", int | None, "x")
+        convert("1.5", int | None, "x")
 
 
 @pytest.mark.parametrize(
@@ -119,6 +120,7 @@ def test_tiny_grid_writes_csv_and_markdown(tmp_path):
     assert table.startswith("my header\n\n| dataset | outliers % | method |")
     assert "| grid2d | 30 | egnc | 1.0000 | 1.0000 | 1/1 |" in table
     assert "| 1.00 |" in table  # egnc relative to itself
+    assert table.rstrip().endswith(bench.SUCCESS_DEFINITION)  # the table says what success means
     if "runtime" in written:
         assert written["runtime"].stat().st_size > 0 and written["precision_recall"].stat().st_size > 0
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(p.name for p in written.values())
@@ -224,11 +226,31 @@ def test_summary_means_over_seeds_time_ratio_and_failures():
 
 
 def test_gtsam_methods_are_skipped_without_gtsam(monkeypatch):
-    monkeypatch.setattr(bench, "gtsam_available", lambda: False)
+    monkeypatch.setattr(bench.runner, "gtsam_available", lambda: False)
     notes: list[str] = []
     records = run_grid(["grid2d"], [10], [1], ["l2", "gtsam-gnc-tls"], data_dir=DATASETS, progress=notes.append)
     assert [r.method for r in records] == ["l2"]
     assert "skipping gtsam-gnc-tls" in notes[0]
+    with pytest.raises(EgncError, match="nothing to run: gtsam is not importable .* for gtsam-lm"):
+        run_grid(["grid2d"], [10], [1], ["gtsam-lm"], data_dir=DATASETS)
+
+
+def test_cli_exits_1_when_no_method_can_run(tmp_path):
+    # gtsam blocked in the child interpreter: the only method asked for cannot run.
+    script = "import sys; sys.modules['gtsam'] = None; from egnc.cli.bench import main; sys.exit(main(sys.argv[1:]))"
+    run = subprocess.run(
+        [sys.executable, "-c", script, "--datasets", "grid2d", "--data-dir", DATASETS, "--methods", "gtsam-lm",
+         "--out", tmp_path / "out"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert run.returncode == 1
+    assert run.stderr.startswith("egnc-bench: error: nothing to run") and run.stderr.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_grid_without_cases_is_an_error():
+    with pytest.raises(EgncError, match="no case"):
+        run_grid(["grid2d"], [], [1], ["l2"], data_dir=DATASETS)
 
 
 def test_gtsam_gnc_tls_on_the_tiny_grid():

@@ -20,6 +20,8 @@ from egnc.errors import EgncError
 from egnc.mu_star import mu_star
 
 DATASETS = Path(__file__).parents[1] / "datasets"
+DOCS = Path(__file__).parents[1] / "docs"
+MAX_FIGURE_BYTES = 300_000
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 INSTALL_HINT = "pip install 'egnc[plot]'"
 
@@ -84,7 +86,41 @@ def test_trajectory_2d_draws_result_initial_and_each_loop_once(mpl, solved2d):
     assert str(len(result.rejected_edges)) in ax.get_title()
 
 
-def test_trajectory_3d_uses_3d_axes(mpl, solved3d):
+def test_trajectory_elements_have_distinct_colours_and_a_legend(mpl, solved2d):
+    from matplotlib.colors import to_hex
+
+    graph, result = solved2d
+    figure = plot.plot_trajectory(result, initial=graph, reference=result.graph)
+    (ax,) = figure.axes
+    colours = {
+        "initial guess": line(ax, "initial guess").get_color(),
+        "result": line(ax, "result").get_color(),
+        "reference": line(ax, "reference").get_color(),
+        "accepted": collection(ax, "accepted").get_colors()[0],
+        "rejected": collection(ax, "rejected").get_colors()[0],
+    }
+    assert len({to_hex(colour, keep_alpha=False) for colour in colours.values()}) == len(colours)
+    labels = [text.get_text() for text in figure.legends[0].get_texts()]
+    assert labels == [
+        f"accepted loop closures ({int((result.inliers & ~result.known_inliers).sum())})",
+        "initial guess",
+        "reference",
+        "result",
+        f"rejected loop closures ({len(result.rejected_edges)})",
+    ]
+    assert all(handle.get_alpha() == 1.0 for handle in figure.legends[0].legend_handles)  # keys stay legible
+
+
+def test_many_loop_closures_are_thinner_and_fainter(mpl):
+    counts = [1, 10, 100, 1000, 100_000]
+    styles = [plot.crowd_style(count) for count in counts]
+    widths, alphas = [s["linewidth"] for s in styles], [s["alpha"] for s in styles]
+    assert widths == sorted(widths, reverse=True) and alphas == sorted(alphas, reverse=True)
+    assert alphas[-1] < alphas[1] / 4 and widths[-1] < widths[1] / 2
+    assert (widths[-1], alphas[-1]) == (plot.CROWD_WIDTH[0], plot.CROWD_ALPHA[0])  # still drawn
+
+
+def test_trajectory_3d_uses_3d_axes_with_equal_scale(mpl, solved3d):
     graph, result = solved3d
     figure = plot.plot_trajectory(result, initial=graph.poses)
     (ax,) = figure.axes
@@ -93,6 +129,30 @@ def test_trajectory_3d_uses_3d_axes(mpl, solved3d):
     assert len(collection(ax, "rejected").get_segments()) == len(result.rejected_edges) > 0
     x, y, z = line(ax, "result").get_data_3d()
     np.testing.assert_allclose(np.stack([x, y, z], axis=1), result.graph.poses[:, :3])
+    # One metre is as long on every axis: the box has the proportions of the axis limits.
+    spans = np.array([np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim()), np.ptp(ax.get_zlim())])
+    box = np.asarray(ax.get_box_aspect())
+    np.testing.assert_allclose(box / box[0], spans / spans[0], rtol=1e-9)
+    drawn = np.concatenate([result.graph.poses[:, :3], graph.poses[:, :3]])
+    assert np.all(ax.get_xlim()[0] <= drawn[:, 0].min()) and np.all(drawn[:, 2].max() <= ax.get_zlim()[1])
+
+
+def test_trajectory_size_and_saved_dpi(mpl, solved2d, tmp_path):
+    from PIL import Image
+
+    graph, result = solved2d
+    figure = plot.plot_trajectory(result, size=(4.0, 3.0))
+    assert tuple(figure.get_size_inches()) == (4.0, 3.0)
+    plot.save_figure(figure, tmp_path / "small.png", dpi=50)
+    assert Image.open(tmp_path / "small.png").size == (200, 150)
+    with pytest.raises(EgncError, match="width must be positive"):
+        plot.plot_trajectory(result, size=(0, 3))
+    with pytest.raises(EgncError, match="size must be"):
+        plot.plot_trajectory(result, size=5)
+    with pytest.raises(EgncError, match="cannot be given with ax"):
+        plot.plot_trajectory(result, size=(4, 3), ax=figure.axes[0])
+    with pytest.raises(EgncError, match="dpi must be positive"):
+        plot.save_figure(figure, tmp_path / "x.png", dpi=0)
 
 
 def test_trajectory_of_a_bare_graph_with_reference_into_given_axes(mpl, solved2d):
@@ -195,17 +255,27 @@ def test_cli_plot_writes_png(mpl, tmp_path):
     assert out.read_bytes()[:8] == PNG_SIGNATURE
 
 
-def test_docs_figures_regenerate_small(mpl, tmp_path):
+def test_docs_figures_regenerate_small(mpl, tmp_path, capsys):
     pytest.importorskip("PIL")  # matplotlib's own dependency
-    spec = importlib.util.spec_from_file_location("make_figures", DATASETS.parent / "docs" / "make_figures.py")
+    spec = importlib.util.spec_from_file_location("make_figures", DOCS / "make_figures.py")
     make_figures = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(make_figures)
-    assert make_figures.main(["--out", str(tmp_path)]) == 0
-    names = {"trajectory_grid2d.png", "kernel.png", "mu_star.png"}
+    # Without the shared datasets the Intel figure is skipped, with a message.
+    assert make_figures.main(["--out", str(tmp_path), "--data-dir", str(tmp_path / "nowhere")]) == 0
+    assert "skipping trajectory_intel30.png" in capsys.readouterr().err
+    names = {"trajectory_grid2d.png", "trajectory_grid3d.png", "kernel.png", "mu_star.png"}
     assert {path.name for path in tmp_path.iterdir()} == names
     for name in names:
         content = (tmp_path / name).read_bytes()
-        assert content[:8] == PNG_SIGNATURE and len(content) < 200_000, name
+        assert content[:8] == PNG_SIGNATURE and len(content) < MAX_FIGURE_BYTES, name
+
+
+def test_committed_docs_figures_are_small_pngs():
+    figures = sorted(DOCS.glob("*.png"))
+    assert {"trajectory_intel30.png", "trajectory_grid3d.png"} <= {path.name for path in figures}
+    for path in figures:
+        content = path.read_bytes()
+        assert content[:8] == PNG_SIGNATURE and len(content) < MAX_FIGURE_BYTES, path.name
 
 
 # ----------------------------------------------------------------------------- no matplotlib
