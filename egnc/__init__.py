@@ -4,6 +4,11 @@ Public API: `solve` a pose graph (or a g2o file) into a `Result`; `read_g2o` / `
 `SolverOptions` and `GncOptions`; the `PoseGraph` container; the `EgncError` hierarchy.
 """
 
+import sys
+
+if sys.version_info < (3, 10):  # noqa: UP036 - pip checks requires-python, a source tree does not
+    raise ImportError(f"egnc needs Python 3.10 or newer; this is Python {sys.version.split()[0]}")
+
 from importlib.metadata import PackageNotFoundError, version
 
 from egnc.api import Result, StageReport, marginal_covariances, solve

@@ -10,6 +10,7 @@ import numpy as np
 
 from egnc.decision import decide_outliers
 from egnc.diagnostics import solve_warnings
+from egnc.errors import GraphError
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
     GncOptions,
@@ -19,7 +20,6 @@ from egnc.gnc import (
     known_inlier_mask,
     run_gnc,
 )
-from egnc.errors import GraphError
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
 from egnc.least_squares import STATUS_MESSAGES, IterationCallback, Problem, SolverOptions

@@ -213,10 +213,10 @@ def run_gnc(
     problem = Problem.from_graph(graph, linear_solver)
     poses = initial_poses
     r = factors.whitened_norms(factors.residuals(poses))
-    stage: Stage | None = schedule.first_stage(r)
+    last = schedule.first_stage(r)
+    stage: Stage | None = last
     reports: list[StageReport] = []
     timings: dict[str, float] = {}
-    last = stage
     status, message = 0, ""
     while stage is not None:
         if stage is not last and _same_loss(stage, last):
@@ -251,7 +251,6 @@ def run_gnc(
             if keep.sum() < active.sum() and connected_components(graph.num_poses, graph.edges[keep])[0] == 1:
                 active = keep
                 problem = Problem.from_graph(graph.subgraph_edges(active), linear_solver)
-    assert last is not None
     return GncOutcome(
         poses=poses,
         weights=last.loss.weight(r),

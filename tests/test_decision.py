@@ -18,7 +18,6 @@ from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
 from egnc.marginals import innovations, pose_covariances
 
-
 OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False)
 """The decision before re-admission: the Geman-McClure classification at chi2.ppf(0.95), re-checked by r^2."""
 
