@@ -14,7 +14,8 @@ So the decision is made on least-squares maps instead, in rounds:
    `e^T (Omega^-1 + A H^-1 A^T)^-1 e <= chi2.ppf(q, d)` (`egnc.marginals`): the map built
    without it predicts its measurement within the combined uncertainty of both. Its residual
    alone (`r^2`) would ignore how uncertain the relative pose of two far-apart poses is.
-4. Repeat until the classification holds (or `MAX_ROUNDS`).
+4. Repeat until the classification holds (or `MAX_ROUNDS`, or a round that reaches the
+   iteration limit).
 
 Both tests have false-alarm rate `1 - q` per honest loop under the linear-Gaussian model
 (the included loop's `r^2` is stochastically smaller than the leave-one-out statistic).
@@ -171,7 +172,7 @@ def decide_outliers(
         )
         if on_stage is not None:
             on_stage(reports[-1])
-        if np.array_equal(decided, inliers):
+        if np.array_equal(decided, inliers) or refined.status == 0:  # settled, or not converging
             break
         inliers = decided
     return poses, inliers, tuple(reports)
