@@ -44,6 +44,8 @@ class SummaryRow:
         failures: e.g. `"1 timeout"`, empty when every run finished.
         precision, recall, ate, rpe_percent, time_s: means over the finished runs (nan if none).
         successes: runs with precision = recall = 1.
+        kept_precision, kept_recall: riSAM's convention (accepted loops positive), means over
+            the finished runs (`RunRecord.kept_precision_recall`).
         time_ratio: `time_s` / the baseline method's `time_s` on the same group (nan without it).
     """
 
@@ -60,6 +62,8 @@ class SummaryRow:
     rpe_percent: float
     time_s: float
     time_ratio: float
+    kept_precision: float
+    kept_recall: float
 
 
 def summarize(records: Sequence[RunRecord], baseline_method: str | None = "risam") -> list[SummaryRow]:
@@ -99,6 +103,8 @@ def summarize(records: Sequence[RunRecord], baseline_method: str | None = "risam
                 rpe_percent=mean([r.rpe_percent for r in finished]),
                 time_s=time_s,
                 time_ratio=time_s / baseline if baseline > 0 else math.nan,
+                kept_precision=mean([r.kept_precision_recall[0] for r in finished]),
+                kept_recall=mean([r.kept_precision_recall[1] for r in finished]),
             )
         )
     return rows
@@ -108,14 +114,15 @@ def format_markdown(rows: Sequence[SummaryRow], baseline_method: str | None = "r
     """A markdown table of `summarize`'s rows, followed by what its columns mean (`SUCCESS_DEFINITION`)."""
     ratio = f"time / {baseline_method}" if baseline_method else "time ratio"
     lines = [
-        "| dataset | outliers % | method | precision | recall | success | ATE (m) | RPE (%) | time (s) "
-        f"| {ratio} | failed |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| dataset | outliers % | method | precision | recall | success | P kept | R kept | ATE (m) | RPE (%) "
+        f"| time (s) | {ratio} | failed |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for row in rows:
         lines.append(
             f"| {row.dataset} | {row.percent:g} | {row.method} | {_fixed(row.precision, 4)} "
-            f"| {_fixed(row.recall, 4)} | {row.successes}/{row.runs} | {_general(row.ate)} "
+            f"| {_fixed(row.recall, 4)} | {row.successes}/{row.runs} | {_fixed(row.kept_precision, 4)} "
+            f"| {_fixed(row.kept_recall, 4)} | {_general(row.ate)} "
             f"| {_fixed(row.rpe_percent, 2)} | {_fixed(row.time_s, 3)} | {_fixed(row.time_ratio, 2)} "
             f"| {row.failures} |"
         )

@@ -78,6 +78,20 @@ class RunRecord:
         """Whether the run finished."""
         return self.status == "ok"
 
+    @property
+    def kept_precision_recall(self) -> tuple[float, float]:
+        """Precision and recall in riSAM's convention, accepted loops positive (the paper's Table 1).
+
+        From the counts: a kept true loop is a true positive, a kept false loop a false positive,
+        a rejected true loop a false negative. Precision is 1 when nothing is kept.
+        """
+        rejected_false = round(self.recall * self.outliers) if self.outliers else 0
+        kept_false = self.outliers - rejected_false
+        kept_true = self.loops - self.outliers - (self.rejected - rejected_false)
+        true_loops = self.loops - self.outliers
+        precision = kept_true / (kept_true + kept_false) if kept_true + kept_false else 1.0
+        return precision, (kept_true / true_loops if true_loops else 1.0)
+
 
 CSV_COLUMNS = tuple(field.name for field in dataclasses.fields(RunRecord))
 """Columns of `results.csv`, in order."""
@@ -90,7 +104,7 @@ def solve_and_score(case: BenchCase, spec: MethodSpec, linear_solver: str) -> di
     """
     if spec.is_gtsam:
         poses, time_s, iterations = gtsam_solve(case.graph, case.known_inliers, spec.method)
-        # GTSAM's outliers by egnc's rule: r^2 > chi2.ppf(0.95, d) on the loop closures at its poses.
+        # GTSAM's outliers by egnc's first rule, r^2 > chi2.ppf(outlier_quantile, d), at its poses.
         factors = BetweenFactors.from_graph(case.graph)
         r = factors.whitened_norms(factors.residuals(to_matrices(case.graph.dim, poses)))
         predicted = ~classify_inliers(r, ~case.known_inliers, case.graph.tangent_dim, GncOptions())
