@@ -58,7 +58,7 @@ from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
 from egnc.io.information import not_positive_definite
-from egnc.io.numbers import check_line_characters, is_float, is_integer
+from egnc.io.numbers import check_line_characters, format_floats, is_float, is_integer
 from egnc.io.text import read_text
 from egnc.lie import so3
 
@@ -303,12 +303,13 @@ def write_irl(log: IrlLog, path: str | os.PathLike) -> None:
     lines = [log.name, log.date, str(log.dim), "nonlinear", log.notes]
     if log.prior is not None:
         prior = log.prior
-        lines.append(f"PRIOR 1 0 {prior.vertex_id} {_numbers(prior.pose)} {_numbers(prior.covariance.ravel())}")
+        values = f"{format_floats(prior.pose)} {format_floats(prior.covariance.ravel())}"
+        lines.append(f"PRIOR 1 0 {prior.vertex_id} {values}")
     covariances = log.covariances.reshape(log.num_edges, -1)
     for k, ((i, j), odometry, outlier, null) in enumerate(
         zip(log.edge_ids.tolist(), log.is_odometry.tolist(), log.is_outlier.tolist(), log.has_null.tolist())
     ):
-        measurement = f"{_numbers(log.measurements[k])} {_numbers(covariances[k])}"
+        measurement = f"{format_floats(log.measurements[k])} {format_floats(covariances[k])}"
         if odometry:
             lines.append(f"ODOMETRY 1 0 {i} {j} {measurement}")
         elif null:
@@ -317,11 +318,6 @@ def write_irl(log: IrlLog, path: str | os.PathLike) -> None:
             lines.append(f"LOOP 1 0 {i} {j} {measurement}")
     with atomic_text_file(Path(path)) as out:
         out.write("\n".join(lines) + "\n")
-
-
-def _numbers(values: np.ndarray) -> str:
-    """Space-separated shortest exact float text."""
-    return " ".join(map(repr, values.tolist()))
 
 
 class _EntryParser:

@@ -62,3 +62,8 @@ def check_line_characters(line: str) -> str | None:
     if match is None:
         return None
     return f"character U+{ord(match.group()):04X} outside a comment: fields must be ASCII, separated by spaces or tabs"
+
+
+def format_floats(values: np.ndarray) -> str:
+    """Space-separated shortest exact text of the floats (`repr`): reading it back gives the same bits."""
+    return " ".join(map(repr, np.asarray(values, dtype=np.float64).tolist()))
