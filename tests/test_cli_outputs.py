@@ -17,19 +17,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli import DATASETS, GRID2D, assert_one_line_error, egnc_solve
 
 import egnc
 from egnc.datasets import read_labels
 from egnc.lie import se3
-
-from test_cli import DATASETS, GRID2D, assert_one_line_error, egnc_solve
 
 GRID3D = DATASETS / "grid3d.g2o"
 
 
 def run_with_stub(stub: str, *args: str | Path) -> subprocess.Popen:
     """Start `egnc-solve args...` in a child whose `egnc.cli` module `cli` was changed by `stub` first."""
-    script = "import sys\nimport egnc.cli.solve as cli\n" + textwrap.dedent(stub) + "\nsys.exit(cli.main(sys.argv[1:]))\n"
+    script = (
+        "import sys\nimport egnc.cli.solve as cli\n" + textwrap.dedent(stub) + "\nsys.exit(cli.main(sys.argv[1:]))\n"
+    )
     return subprocess.Popen(
         [sys.executable, "-c", script, *map(str, args)],
         stdin=subprocess.DEVNULL,
@@ -130,8 +131,12 @@ def wait_for_line(process: subprocess.Popen, expected: str) -> None:
     raise AssertionError(f"no {expected!r} line from the child")
 
 
-@pytest.mark.parametrize(("signum", "code", "word"), [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
-@pytest.mark.parametrize(("stub", "marker"), [(SLOW_SOLVE, "solving"), (SLOW_LAST_OUTPUT, "writing")], ids=["solve", "write"])
+@pytest.mark.parametrize(
+    ("signum", "code", "word"), [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")]
+)
+@pytest.mark.parametrize(
+    ("stub", "marker"), [(SLOW_SOLVE, "solving"), (SLOW_LAST_OUTPUT, "writing")], ids=["solve", "write"]
+)
 def test_interruption_is_one_line_and_leaves_no_file(tmp_path, signum, code, word, stub, marker):
     out, report, edges = tmp_path / "out.g2o", tmp_path / "report.json", tmp_path / "edges.csv"
     out.write_text("old\n")
@@ -183,7 +188,9 @@ cli.solve = failing
     ids=["status-5", "NumericalError", "nan-poses"],
 )
 def test_numerical_failure_exits_3_in_one_line_without_output(tmp_path, stub, fragment):
-    run = finish(run_with_stub(stub, GRID2D, "--method", "l2", "-q", "-o", tmp_path / "out.g2o", "--report", tmp_path / "r.json"))
+    run = finish(
+        run_with_stub(stub, GRID2D, "--method", "l2", "-q", "-o", tmp_path / "out.g2o", "--report", tmp_path / "r.json")
+    )
     assert run.returncode == 3, run.stderr
     assert run.stdout == ""
     [line] = run.stderr.splitlines()
@@ -213,7 +220,10 @@ def test_report_is_strict_json_with_nulls_and_warnings(tmp_path):
     assert run.returncode == 0, run.stderr
     content = json.loads(report.read_text(), parse_constant=reject_constants)
     assert content["initial_cost"] is None
-    assert content["warnings"] == ["most loop closures were rejected", "report field initial_cost is inf, written as null"]
+    assert content["warnings"] == [
+        "most loop closures were rejected",
+        "report field initial_cost is inf, written as null",
+    ]
     warning_lines = [line for line in run.stderr.splitlines() if line.startswith("warning: ")]
     assert warning_lines == [f"warning: {note}" for note in content["warnings"]]
 
@@ -271,9 +281,13 @@ def test_known_inliers_from_an_index_file_and_from_labels(tmp_path):
     is_false, _ = read_labels(DATASETS / "grid2d_outliers.labels.json")
     chosen = np.flatnonzero(graph.is_odometry)[:10]
     indices = tmp_path / "inliers.txt"
-    indices.write_text("# ten odometry edges\n" + " ".join(map(str, chosen[:5])) + "\n" + "\n".join(map(str, chosen[5:])))
+    indices.write_text(
+        "# ten odometry edges\n" + " ".join(map(str, chosen[:5])) + "\n" + "\n".join(map(str, chosen[5:]))
+    )
     report = tmp_path / "r.json"
-    run = egnc_solve(DATASETS / "grid2d_outliers.g2o", "--known-inliers", indices, "--method", "l2", "-q", "--report", report)
+    run = egnc_solve(
+        DATASETS / "grid2d_outliers.g2o", "--known-inliers", indices, "--method", "l2", "-q", "--report", report
+    )
     assert run.returncode == 0, run.stderr
     assert json.loads(report.read_text())["known_inliers"] == 10
 
@@ -317,7 +331,9 @@ def test_tum_trajectory_runs_through_evo_ape(tmp_path):
 
 def test_kitti_trajectory_holds_the_pose_matrices(tmp_path):
     out = tmp_path / "poses.txt"
-    run = egnc_solve(GRID3D, "--method", "l2", "-q", "--max-iters", "0", "--trajectory", out, "--trajectory-format", "kitti")
+    run = egnc_solve(
+        GRID3D, "--method", "l2", "-q", "--max-iters", "0", "--trajectory", out, "--trajectory-format", "kitti"
+    )
     assert run.returncode == 0, run.stderr
     rows = np.loadtxt(out)
     graph = egnc.read_g2o(GRID3D)

@@ -59,9 +59,7 @@ def xyz_quaternions(graph: PoseGraph) -> np.ndarray:
     return np.concatenate((np.stack((x, y, zeros), axis=1), np.where(q[:, 3:] < 0, -q, q)), axis=1)
 
 
-def write_trajectory(
-    graph: PoseGraph, path: str | os.PathLike, file_format: TrajectoryFormat | None = None
-) -> None:
+def write_trajectory(graph: PoseGraph, path: str | os.PathLike, file_format: TrajectoryFormat | None = None) -> None:
     """Write the poses of `graph` in TUM or KITTI format, atomically, in vertex-id order.
 
     Args:
@@ -78,4 +76,3 @@ def write_trajectory(
         lines = (format_floats(row) for row in rows)
     with atomic_text_file(Path(path)) as out:
         out.write("".join(f"{line}\n" for line in lines))
-
