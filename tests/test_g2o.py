@@ -140,6 +140,8 @@ def test_skip_unknown_ignores_other_tags_and_writes_them_back(tmp_path):
     lines = written.read_text().splitlines()
     assert [line for line in lines if line in unknown] == unknown  # verbatim, in file order
     assert lines.index(unknown[-1]) < lines.index(next(line for line in lines if line.startswith("EDGE")))
+    with pytest.raises(G2oFormatError, match="'2.5', which is not a record tag"):  # damage is never skipped
+        read_g2o(write_text(tmp_path, text + "2.5 VERTEX_SE2 1 0 0\n"), skip_unknown=True)
 
 
 def test_missing_vertex_composed_from_known_neighbour(tmp_path):
@@ -233,6 +235,7 @@ ERROR_CASES = {
     "unknown tag": (
         V2 + "VERTEX_XY 7 1 2\n" + E2, 2, "unknown tag 'VERTEX_XY'; pass skip_unknown=True / --skip-unknown"
     ),
+    "number where the tag belongs": (V2 + "2.5 VERTEX_SE2 1 0 0\n" + E2, 2, "'2.5', which is not a record tag"),
     "nan": (V2 + "VERTEX_SE2 1 nan 0 0\n" + E2, 2, "field 2 is nan, expected a finite number"),
     "inf in information": (V2 + V2B + E2.replace(" 0.0 1.0\n", " inf 1.0\n"), 3, "is inf"),
     "indefinite information": (

@@ -22,7 +22,7 @@ from egnc.api import METHODS, Result, StageReport, solve
 from egnc.cli.outputs import OutputPlan
 from egnc.cli.report import report_dict, summary
 from egnc.cli.signals import INTERRUPT_EXIT_CODES, Terminated, sigterm_raises
-from egnc.errors import EgncError, NumericalError
+from egnc.errors import EgncError, EgncWarning, NumericalError
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
 from egnc.io.edge_roles import read_known_inliers
@@ -187,20 +187,31 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         warnings.simplefilter("always")
         graph = read_g2o(args.input, skip_unknown=args.skip_unknown, information=args.information)
         known_inliers = _known_inliers(args.known_inliers, graph)
-    notes = [str(warning.message) for warning in caught]
-    _print_warnings(notes)
-    result = solve(
-        graph,
-        args.method,
-        known_inliers=known_inliers,
-        linear_solver=args.linear_solver,
-        options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
-        on_stage=None if args.quiet else _print_stage_progress(),
-    )
+        read_notes = _warning_notes(caught)
+        _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
+        read_count = len(caught)
+        result = solve(
+            graph,
+            args.method,
+            known_inliers=known_inliers,
+            linear_solver=args.linear_solver,
+            options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
+            on_stage=None if args.quiet else _print_stage_progress(),
+        )
     _require_finite(result, args.input)
-    report = report_dict(result, notes)
-    _print_warnings(report["warnings"][len(notes) :])
+    report = report_dict(result, read_notes + _warning_notes(caught[read_count:]))
+    _print_warnings(report["warnings"][len(read_notes) :])  # the solve's, the result's, the report's
     return result, plan.write(result, graph, report)
+
+
+def _warning_notes(caught: list[warnings.WarningMessage]) -> list[str]:
+    """One line per `EgncWarning`; other warnings (NumPy's overflow notices, ...) summed up in one line."""
+    notes = [str(warning.message) for warning in caught if issubclass(warning.category, EgncWarning)]
+    others = [warning for warning in caught if not issubclass(warning.category, EgncWarning)]
+    if others:
+        first = f"{others[0].category.__name__}: {others[0].message}"
+        notes.append(f"{len(others)} warnings from the libraries egnc uses; the first: {first}")
+    return notes
 
 
 def _known_inliers(choice: str, graph: PoseGraph) -> str | np.ndarray:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import collections
 import itertools
 import os
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -74,6 +75,8 @@ _EDGE_TAGS = {
 }
 _TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values())}
 _FIX = "FIX"
+_TAG_NAME = re.compile(r"[A-Z][A-Z0-9_:]*", re.IGNORECASE)
+"""What a record tag looks like (`VERTEX_XY`, `PARAMS_SE3OFFSET`, ...): anything else is damage, never skipped."""
 
 
 @dataclass
@@ -271,6 +274,8 @@ def _split_records(
                     raise context.error("FIX needs at least one vertex id", line_number)
                 fixes.rows.append(fields)
                 fixes.lines.append(line_number)
+            elif not _TAG_NAME.fullmatch(name):
+                raise context.error(f"line starts with {name!r}, which is not a record tag", line_number)
             elif skip_unknown:
                 unknown.append(raw_line)
             else:
