@@ -276,6 +276,18 @@ def test_vertices_without_edges_are_written_back_unchanged(tmp_path):
     assert not np.array_equal(solved.poses[:-3], source.poses)  # the rest was optimized
 
 
+def test_duplicate_edges_are_counted_in_one_warning(tmp_path):
+    graph = tmp_path / "g.g2o"
+    reversed_first = "EDGE_SE2 1 0 -1 0 0 1 0 0 1 0 1\n"
+    graph.write_text(VERTICES + EDGES + reversed_first + EDGES.splitlines()[2] + "\n")
+    run = egnc_solve(graph, "--method", "l2", "-q")
+    assert run.returncode == 0, run.stderr
+    assert run.stderr.splitlines() == [
+        f"warning: {graph}: 2 duplicate edges (the same two vertices as an earlier edge, in either direction); "
+        "all are kept and solved"
+    ]
+
+
 def test_known_inliers_from_an_index_file_and_from_labels(tmp_path):
     graph = egnc.read_g2o(DATASETS / "grid2d_outliers.g2o")
     is_false, _ = read_labels(DATASETS / "grid2d_outliers.labels.json")

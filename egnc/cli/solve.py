@@ -187,7 +187,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         warnings.simplefilter("always")
         graph = read_g2o(args.input, skip_unknown=args.skip_unknown, information=args.information)
         known_inliers = _known_inliers(args.known_inliers, graph)
-        read_notes = _warning_notes(caught)
+        read_notes = _warning_notes(caught) + _duplicate_note(graph, args.input)
         _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
         read_count = len(caught)
         result = solve(
@@ -212,6 +212,17 @@ def _warning_notes(caught: list[warnings.WarningMessage]) -> list[str]:
         first = f"{others[0].category.__name__}: {others[0].message}"
         notes.append(f"{len(others)} warnings from the libraries egnc uses; the first: {first}")
     return notes
+
+
+def _duplicate_note(graph: PoseGraph, input_path: Path) -> list[str]:
+    """The warning about duplicate edges, if the graph has any (`PoseGraph.is_duplicate`)."""
+    duplicates = int(graph.is_duplicate.sum())
+    if not duplicates:
+        return []
+    return [
+        f"{input_path}: {duplicates} duplicate edges (the same two vertices as an earlier edge, in either "
+        "direction); all are kept and solved"
+    ]
 
 
 def _known_inliers(choice: str, graph: PoseGraph) -> str | np.ndarray:

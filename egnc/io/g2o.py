@@ -123,7 +123,7 @@ def read_g2o(
 
     Warns:
         EgncWarning: one per kind of accepted oddity: skipped lines (count per tag), repaired
-            information matrices (count, largest change), vertices without edges, duplicate edges.
+            information matrices (count, largest change), vertices without edges.
 
     Raises:
         G2oFormatError: the file cannot be read or is malformed; names the file and line.
@@ -194,12 +194,6 @@ def read_g2o(
         edge_lines=edge_lines,
         unknown_lines=tuple(unknown),
     )
-    duplicates = int(graph.is_duplicate.sum())
-    if duplicates:
-        notes.append(
-            f"{path}: {duplicates} duplicate edges (the same two vertices as an earlier edge, in either direction); "
-            "all are kept and solved"
-        )
     for note in notes:
         warnings.warn(note, EgncWarning, stacklevel=2)
     return graph
