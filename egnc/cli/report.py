@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from egnc.api import Result
+from egnc.connectivity import describe_ids
 
 
 def accepted_cost(result: Result) -> float:
@@ -90,8 +91,10 @@ def summary(result: Result, written: list[Path]) -> str:
     """A short human-readable summary of a solve: size, method, cost, termination, rejections, files."""
     graph = result.graph
     limited = iteration_limited_stages(result)
-    if limited:
-        stopped = f"iteration limit reached in stage{'s' if len(limited) > 1 else ''} {', '.join(map(str, limited))}"
+    if len(limited) == 1:
+        stopped = f"iteration limit reached in stage {limited[0]}"
+    elif limited:
+        stopped = f"iteration limit reached in {len(limited)} stages: {describe_ids(np.array(limited))}"
     else:
         stopped = result.message
     lines = [
