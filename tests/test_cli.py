@@ -154,10 +154,11 @@ def test_help_lists_every_option_and_the_examples():
     run = egnc_solve("--help")
     assert run.returncode == 0
     for option in ("--output", "--method", "--known-inliers", "--drop-outliers", "--linear-solver", "--solver",
-                   "--max-iters", "--skip-unknown", "--report", "--quiet", "--version"):  # fmt: skip
+                   "--max-iters", "--skip-unknown", "--report", "--quiet", "--version", "--information",
+                   "--trajectory", "--trajectory-format", "--edges"):  # fmt: skip
         assert option in run.stdout
     assert "{" + ",".join(METHODS) + "}" in run.stdout
-    assert "examples:" in run.stdout
+    assert "examples:" in run.stdout and "3 numerical failure" in run.stdout
     assert "egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o" in run.stdout
 
 

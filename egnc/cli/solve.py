@@ -42,6 +42,8 @@ EXAMPLES = """examples:
   egnc-solve graph.g2o --drop-outliers -o inliers_only.g2o
   egnc-solve graph.g2o --method l2 --linear-solver scipy
   egnc-solve graph.g2o --plot trajectory.png
+  egnc-solve graph.g2o --trajectory solved.tum --edges edges.csv
+  egnc-solve cubicle.g2o --information nearest-pd --known-inliers odometry
 
 exit codes: 0 success; 1 error in the input, the solve or an output (one line on stderr, no
 output written); 2 bad command-line usage; 3 numerical failure (no output written);
