@@ -451,6 +451,24 @@ def test_failed_replace_removes_temporary(tiny_graph, tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["graph.g2o"]
 
 
+def test_all_or_nothing_renames_only_when_every_file_is_written(tiny_graph, tmp_path):
+    first, second = tmp_path / "first.g2o", tmp_path / "second.g2o"
+    first.write_text("old first\n")
+    with pytest.raises(RuntimeError, match="second failed"), atomic_module.all_or_nothing():
+        write_g2o(tiny_graph, first)
+        assert first.read_text() == "old first\n"  # written to a temporary, not renamed yet
+        with atomic_module.atomic_text_file(second) as out:
+            out.write("partial")
+            raise RuntimeError("second failed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["first.g2o", "graph.g2o"]
+    assert first.read_text() == "old first\n"
+
+    with atomic_module.all_or_nothing():
+        write_g2o(tiny_graph, first)
+        write_g2o(tiny_graph, second)
+    assert read_g2o(first).num_edges == read_g2o(second).num_edges == tiny_graph.num_edges
+
+
 def test_non_finite_graph_is_not_written(tiny_graph, tmp_path):
     poses = tiny_graph.poses.copy()
     poses[1, 0] = np.nan
