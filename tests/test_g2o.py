@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -467,6 +468,20 @@ def test_all_or_nothing_renames_only_when_every_file_is_written(tiny_graph, tmp_
         write_g2o(tiny_graph, first)
         write_g2o(tiny_graph, second)
     assert read_g2o(first).num_edges == read_g2o(second).num_edges == tiny_graph.num_edges
+
+
+def test_interruption_during_the_renames_is_held_back(tiny_graph, tmp_path, monkeypatch):
+    replace = atomic_module._replace
+
+    def interrupted_replace(temporary, path):
+        os.kill(os.getpid(), signal.SIGINT)  # would raise KeyboardInterrupt if it were delivered
+        replace(temporary, path)
+
+    monkeypatch.setattr(atomic_module, "_replace", interrupted_replace)
+    with atomic_module.all_or_nothing():
+        write_g2o(tiny_graph, tmp_path / "a.g2o")
+        write_g2o(tiny_graph, tmp_path / "b.g2o")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.g2o", "b.g2o", "graph.g2o"]
 
 
 def test_non_finite_graph_is_not_written(tiny_graph, tmp_path):

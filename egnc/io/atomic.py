@@ -43,9 +43,9 @@ def atomic_binary_file(path: Path) -> contextlib.AbstractContextManager[BinaryIO
 def all_or_nothing() -> Iterator[None]:
     """Defer the renames of every atomic file written in the block until the block succeeds.
 
-    On success all files appear (renamed with SIGINT and SIGTERM held back, so an interruption
-    cannot stop half-way); on any exception, interruptions included, every temporary is removed
-    and no file is replaced.
+    On success all files appear (renamed with SIGINT and SIGTERM held back and dropped, so an
+    interruption cannot stop half-way); on any exception before that, interruptions included,
+    every temporary is removed and no file is replaced.
     """
     renames: list[tuple[Path, Path]] = []
     token = _pending.set(renames)
@@ -94,12 +94,23 @@ def _process_exists(pid: int) -> bool:
 
 @contextlib.contextmanager
 def _signals_held() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back during the block; they are delivered after it."""
+    """Hold SIGINT and SIGTERM back during the block, and drop those that arrived meanwhile.
+
+    The block is a few renames: once they start, finishing them (and the run) is the only way to
+    leave no mix of old and new files, so an interruption in those milliseconds is not acted on.
+    Without `pthread_sigmask` (Windows) the block runs unprotected.
+    """
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
     held = {signal.SIGINT, signal.SIGTERM}
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
         yield
     finally:
+        arrived = signal.sigpending() & held
+        if arrived:
+            signal.sigwait(arrived)
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
