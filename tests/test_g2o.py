@@ -470,7 +470,7 @@ def test_all_or_nothing_renames_only_when_every_file_is_written(tiny_graph, tmp_
     assert read_g2o(first).num_edges == read_g2o(second).num_edges == tiny_graph.num_edges
 
 
-def test_interruption_during_the_renames_is_held_back(tiny_graph, tmp_path, monkeypatch):
+def test_interruption_during_the_renames_is_ignored(tiny_graph, tmp_path, monkeypatch):
     replace = atomic_module._replace
 
     def interrupted_replace(temporary, path):

@@ -15,6 +15,7 @@ import os
 import re
 import secrets
 import signal
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO, TextIO
@@ -43,8 +44,8 @@ def atomic_binary_file(path: Path) -> contextlib.AbstractContextManager[BinaryIO
 def all_or_nothing() -> Iterator[None]:
     """Defer the renames of every atomic file written in the block until the block succeeds.
 
-    On success all files appear (renamed with SIGINT and SIGTERM held back and dropped, so an
-    interruption cannot stop half-way); on any exception before that, interruptions included,
+    On success all files appear (renamed with SIGINT and SIGTERM ignored, so an interruption
+    cannot stop half-way); on any exception before that, interruptions included,
     every temporary is removed and no file is replaced.
     """
     renames: list[tuple[Path, Path]] = []
@@ -94,24 +95,24 @@ def _process_exists(pid: int) -> bool:
 
 @contextlib.contextmanager
 def _signals_held() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back during the block, and drop those that arrived meanwhile.
+    """Ignore SIGINT and SIGTERM during the block.
 
     The block is a few renames: once they start, finishing them (and the run) is the only way to
     leave no mix of old and new files, so an interruption in those milliseconds is not acted on.
-    Without `pthread_sigmask` (Windows) the block runs unprotected.
+    Python handlers are replaced rather than the signals masked, because a masked signal is still
+    delivered to another thread (NumPy's BLAS workers), and only the main thread can do that; in
+    other threads the block runs unprotected.
     """
-    if not hasattr(signal, "pthread_sigmask"):
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    held = {signal.SIGINT, signal.SIGTERM}
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    previous = {number: signal.signal(number, signal.SIG_IGN) for number in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        arrived = signal.sigpending() & held
-        if arrived:
-            signal.sigwait(arrived)
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        for number, handler in previous.items():
+            if handler is not None:  # None: installed from C, cannot be restored from Python
+                signal.signal(number, handler)
 
 
 def _replace(temporary: Path, path: Path) -> None:
