@@ -64,20 +64,27 @@ def describe_components(vertex_ids: np.ndarray, labels: np.ndarray) -> str:
     parts = []
     for label in range(min(count, _MAX_COMPONENTS_SHOWN)):
         ids = vertex_ids[labels == label]
-        parts.append(f"{_format_id_runs(ids)} ({len(ids)} pose{'s' if len(ids) != 1 else ''})")
+        parts.append(f"{describe_ids(ids)} ({len(ids)} pose{'s' if len(ids) != 1 else ''})")
     if count > _MAX_COMPONENTS_SHOWN:
         parts.append(f"... ({count - _MAX_COMPONENTS_SHOWN} more)")
     return ", ".join(parts)
 
 
-def require_connected(vertex_ids: np.ndarray, edges: np.ndarray, *, source: str = "") -> None:
-    """Raise `GraphError` unless the edges connect every pose.
+def require_connected(
+    vertex_ids: np.ndarray, edges: np.ndarray, *, source: str = "", ignore: np.ndarray | None = None
+) -> None:
+    """Raise `GraphError` unless the edges connect every pose (but the `ignore`d ones).
 
     Args:
         vertex_ids: `(N,)` sorted vertex ids, used only to name poses in the message.
         edges: `(E, 2)` int row indices `(i, j)` into `vertex_ids`.
         source: where the graph came from (e.g. a file name), prefixed to the message.
+        ignore: `(N,)` bool, poses left out of the check (e.g. from `isolated_vertices`).
     """
+    if ignore is not None and ignore.any():
+        kept = np.flatnonzero(~ignore)
+        vertex_ids = np.asarray(vertex_ids)[kept]
+        edges = np.searchsorted(kept, edges)  # no edge touches an ignored pose
     count, labels = connected_components(len(vertex_ids), edges)
     if count <= 1:
         return
@@ -89,7 +96,25 @@ def require_connected(vertex_ids: np.ndarray, edges: np.ndarray, *, source: str 
     )
 
 
-def _format_id_runs(ids: np.ndarray) -> str:
+def isolated_vertices(num_poses: int, edges: np.ndarray) -> np.ndarray:
+    """`(N,)` bool: the poses that no edge touches."""
+    return np.bincount(np.asarray(edges).ravel(), minlength=num_poses) == 0
+
+
+def hold_isolated_fixed(fixed: np.ndarray, isolated: np.ndarray) -> np.ndarray:
+    """The `(N,)` fixed mask with the isolated poses held fixed, and the gauge kept on the others.
+
+    Fixed poses carry no unknowns, so isolated ones cannot make the normal equations singular.
+    The solver fixes row 0 only when no pose is fixed; when no connected pose was fixed, the
+    lowest connected row is fixed here instead, as the gauge it would otherwise have taken.
+    """
+    fixed = fixed | isolated
+    if not fixed[~isolated].any():
+        fixed[np.argmin(isolated)] = True
+    return fixed
+
+
+def describe_ids(ids: np.ndarray) -> str:
     """Format sorted ids as runs of consecutive values: `{0..9, 12, 20..29, ...}`."""
     breaks = np.flatnonzero(np.diff(ids) != 1) + 1
     starts = np.concatenate(([0], breaks))

@@ -35,3 +35,11 @@ class SolverError(EgncError):
 
 class NumericalError(SolverError):
     """The problem cannot be represented in double precision, or the solve produced non-finite numbers."""
+
+
+class EgncWarning(UserWarning):
+    """Something the user should know about an input egnc accepted (repaired, skipped or held fixed).
+
+    Raised with `warnings.warn`, so library code never prints; `egnc-solve` shows each one as a
+    `warning: ...` line on stderr and lists them in its JSON report.
+    """

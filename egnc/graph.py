@@ -12,7 +12,7 @@ egnc's tangent vectors (`[v, omega]`), so no permutation is ever applied.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,9 +47,12 @@ class PoseGraph:
             Edges are kept in input-file order.
         measurements: `(E, P)` float64 relative poses `Z_ij`, same parametrization as `poses`.
         information: `(E, d, d)` float64 symmetric positive-definite information matrices.
-        fixed: `(N,)` bool, vertices held constant (g2o `FIX`); when none is fixed the solver fixes
-            vertex 0 to remove the gauge freedom.
+        fixed: `(N,)` bool, vertices held constant (g2o `FIX`, and vertices no edge touches); when
+            none is fixed the solver fixes vertex 0 to remove the gauge freedom.
         edge_lines: `(E,)` int64 1-based source line of each edge (0 when not read from a file).
+        unknown_lines: lines of the source file with tags egnc does not read (landmarks,
+            parameters, ...), verbatim, kept by `read_g2o(skip_unknown=True)` so that
+            `write_g2o` writes them back.
     """
 
     dim: int
@@ -60,6 +63,7 @@ class PoseGraph:
     information: np.ndarray
     fixed: np.ndarray = field(default=None)  # type: ignore[arg-type]
     edge_lines: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    unknown_lines: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.dim not in POSE_SIZE:
@@ -91,6 +95,7 @@ class PoseGraph:
             raise GraphError("edges refer to vertex rows outside [0, N)")
         for name in _DTYPES:
             getattr(self, name).setflags(write=False)
+        object.__setattr__(self, "unknown_lines", tuple(map(str, self.unknown_lines)))
 
     @property
     def num_poses(self) -> int:
@@ -109,38 +114,36 @@ class PoseGraph:
 
     @property
     def is_odometry(self) -> np.ndarray:
-        """`(E,)` bool: edges joining consecutive ids (`id_j == id_i + 1`), the known inliers by default."""
+        """`(E,)` bool: edges joining consecutive ids in either direction (`id_j == id_i +/- 1`),
+        the known inliers by default."""
         ids = self.vertex_ids[self.edges]
-        return ids[:, 1] == ids[:, 0] + 1
+        return (ids[:, 1] == ids[:, 0] + 1) | (ids[:, 0] == ids[:, 1] + 1)
 
     @property
     def is_loop_closure(self) -> np.ndarray:
         """`(E,)` bool: every edge that is not odometry."""
         return ~self.is_odometry
 
+    @property
+    def is_duplicate(self) -> np.ndarray:
+        """`(E,)` bool: edges joining the same two vertices as an earlier edge, in either direction."""
+        pairs = np.sort(self.edges, axis=1)
+        _, first = np.unique(pairs, axis=0, return_index=True)
+        duplicate = np.ones(self.num_edges, dtype=bool)
+        duplicate[first] = False
+        return duplicate
+
     def with_poses(self, poses: np.ndarray) -> PoseGraph:
         """Return a copy of the graph with new poses `(N, P)`, e.g. an optimized trajectory."""
-        return PoseGraph(
-            dim=self.dim,
-            vertex_ids=self.vertex_ids,
-            poses=np.array(poses, dtype=np.float64),
-            edges=self.edges,
-            measurements=self.measurements,
-            information=self.information,
-            fixed=self.fixed,
-            edge_lines=self.edge_lines,
-        )
+        return replace(self, poses=np.array(poses, dtype=np.float64))
 
     def subgraph_edges(self, keep: np.ndarray) -> PoseGraph:
         """Return a copy with only the edges where `keep` `(E,)` bool is true (poses unchanged)."""
         keep = np.asarray(keep, dtype=bool)
-        return PoseGraph(
-            dim=self.dim,
-            vertex_ids=self.vertex_ids,
-            poses=self.poses,
+        return replace(
+            self,
             edges=self.edges[keep],
             measurements=self.measurements[keep],
             information=self.information[keep],
-            fixed=self.fixed,
             edge_lines=self.edge_lines[keep],
         )

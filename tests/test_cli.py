@@ -154,19 +154,33 @@ def test_help_lists_every_option_and_the_examples():
     run = egnc_solve("--help")
     assert run.returncode == 0
     for option in ("--output", "--method", "--known-inliers", "--drop-outliers", "--linear-solver", "--solver",
-                   "--max-iters", "--skip-unknown", "--report", "--quiet", "--version"):  # fmt: skip
+                   "--max-iters", "--skip-unknown", "--report", "--quiet", "--version", "--information",
+                   "--trajectory", "--trajectory-format", "--edges"):  # fmt: skip
         assert option in run.stdout
     assert "{" + ",".join(METHODS) + "}" in run.stdout
-    assert "examples:" in run.stdout
+    assert "examples:" in run.stdout and "3 numerical failure" in run.stdout
     assert "egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o" in run.stdout
 
 
-def test_skip_unknown_ignores_foreign_lines(tmp_path):
+def test_skip_unknown_writes_every_landmark_line_back(tmp_path):
+    # A SLAM graph with landmarks: poses, then point vertices and pose-point edges egnc does not read.
+    landmarks = [f"VERTEX_XY {9000 + k} {k}.5 -{k}.25" for k in range(5)]
+    observations = [f"EDGE_SE2_XY {k} {9000 + k} 0.5 0.25 100 0 100" for k in range(5)]
     graph = tmp_path / "landmarks.g2o"
-    graph.write_text(GRID2D.read_text() + "VERTEX_XY 9999 1.0 2.0\n")
+    graph.write_text("\n".join(landmarks) + "\n" + GRID2D.read_text() + "\n".join(observations) + "\n")
     assert egnc_solve(graph, "--method", "l2", "-q").returncode == 1
-    run = egnc_solve(graph, "--method", "l2", "-q", "--skip-unknown")
-    assert (run.returncode, run.stderr) == (0, "")
+    out = tmp_path / "out.g2o"
+    run = egnc_solve(graph, "--method", "l2", "-q", "--skip-unknown", "-o", out)
+    assert run.returncode == 0, run.stderr
+    assert run.stderr.splitlines() == [
+        f"warning: {graph}: skipped 10 lines with tags egnc does not read (VERTEX_XY 5, EDGE_SE2_XY 5); "
+        "write_g2o (egnc-solve -o) writes them back unchanged"
+    ]
+    written = out.read_text().splitlines()
+    assert [line for line in written if not line.startswith(("VERTEX_SE2", "EDGE_SE2 ", "FIX"))] == [
+        *landmarks, *observations
+    ]
+    np.testing.assert_array_equal(egnc.read_g2o(out, skip_unknown=True).edges, egnc.read_g2o(GRID2D).edges)
 
 
 @pytest.mark.parametrize(
@@ -196,7 +210,7 @@ BAD_INPUTS = {
     "unknown_tag": (VERTICES + "POINT 3 1 2\n" + GOOD_EDGE, ":3: unknown tag 'POINT'"),
     "not_positive_definite": (VERTICES + "EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", ":3: information matrix is not positive"),
     "truncated": (VERTICES + GOOD_EDGE.rstrip("\n")[:-4], ":3: file looks truncated"),
-    "disconnected": ("VERTEX_SE2 7 0 0 0\n" + VERTICES + GOOD_EDGE, ": the pose graph is disconnected"),
+    "disconnected": (VERTICES + GOOD_EDGE + GOOD_EDGE.replace("0 1 ", "5 6 ", 1), ": the pose graph is disconnected"),
     "empty": ("# nothing here\n", ": no EDGE_SE2 or EDGE_SE3:QUAT lines"),
 }
 

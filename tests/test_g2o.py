@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 
 import egnc.io.atomic as atomic_module
 import egnc.io.g2o as g2o_module
-from egnc.errors import EgncError, G2oFormatError, GraphError
+from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
 from egnc.graph import PoseGraph
 from egnc.initialize import spanning_tree
 from egnc.io import read_g2o, write_g2o
@@ -32,7 +33,8 @@ DATASETS = {
     "smallGrid3D.g2o": (3, 125, 297),
     "tinyGrid3D.g2o": (3, 9, 11),
 }
-# cubicle.g2o stores 5021 indefinite information matrices (first on line 5753), so it is rejected.
+# cubicle.g2o stores 5021 indefinite information matrices (first on line 5753), so it is rejected
+# unless a repair is asked for.
 UNREADABLE = {"cubicle.g2o": 5753}
 READABLE = sorted(set(DATASETS) - set(UNREADABLE))
 ARRAYS = ("vertex_ids", "poses", "edges", "measurements", "information", "fixed")
@@ -126,11 +128,21 @@ def test_crlf_line_endings(tmp_path):
     assert_same_graph(read_g2o(path), read_g2o(write_text(tmp_path, TINY_2D)))
 
 
-def test_skip_unknown_ignores_other_tags(tmp_path):
-    text = V2 + "VERTEX_XY 7 1 2\nPARAMS_SE3OFFSET 0 0 0 0 0 0 0 1\n" + E2
-    graph = read_g2o(write_text(tmp_path, text), skip_unknown=True)
+def test_skip_unknown_ignores_other_tags_and_writes_them_back(tmp_path):
+    unknown = ["VERTEX_XY 7 1 2", "PARAMS_SE3OFFSET 0 0 0 0 0 0 0 1  # offset", "VERTEX_XY 8 3 4"]
+    text = V2 + "\n".join(unknown[:2]) + "\n" + E2 + unknown[2] + "\n"
+    with pytest.warns(EgncWarning, match=r"skipped 3 lines .*\(VERTEX_XY 2, PARAMS_SE3OFFSET 1\)"):
+        graph = read_g2o(write_text(tmp_path, text), skip_unknown=True)
     np.testing.assert_array_equal(graph.vertex_ids, [0, 1])
     np.testing.assert_array_equal(graph.edge_lines, [4])
+    assert graph.unknown_lines == tuple(unknown)
+    written = tmp_path / "out.g2o"
+    write_g2o(graph.with_poses(graph.poses + 1), written)
+    lines = written.read_text().splitlines()
+    assert [line for line in lines if line in unknown] == unknown  # verbatim, in file order
+    assert lines.index(unknown[-1]) < lines.index(next(line for line in lines if line.startswith("EDGE")))
+    with pytest.raises(G2oFormatError, match="'2.5', which is not a record tag"):  # damage is never skipped
+        read_g2o(write_text(tmp_path, text + "2.5 VERTEX_SE2 1 0 0\n"), skip_unknown=True)
 
 
 def test_missing_vertex_composed_from_known_neighbour(tmp_path):
@@ -224,6 +236,7 @@ ERROR_CASES = {
     "unknown tag": (
         V2 + "VERTEX_XY 7 1 2\n" + E2, 2, "unknown tag 'VERTEX_XY'; pass skip_unknown=True / --skip-unknown"
     ),
+    "number where the tag belongs": (V2 + "2.5 VERTEX_SE2 1 0 0\n" + E2, 2, "'2.5', which is not a record tag"),
     "nan": (V2 + "VERTEX_SE2 1 nan 0 0\n" + E2, 2, "field 2 is nan, expected a finite number"),
     "inf in information": (V2 + V2B + E2.replace(" 0.0 1.0\n", " inf 1.0\n"), 3, "is inf"),
     "indefinite information": (
@@ -274,13 +287,105 @@ def test_unreadable_files(tmp_path):
 
 
 def test_disconnected_graph_names_components(tmp_path):
-    text = E2 + E2.replace("0 1 ", "5 6 ", 1) + E2.replace("0 1 ", "6 7 ", 1) + "VERTEX_SE2 9 0 0 0\n"
-    path = write_text(tmp_path, text, name="islands.g2o")
+    text = E2 + E2.replace("0 1 ", "5 6 ", 1) + E2.replace("0 1 ", "6 7 ", 1) + E2.replace("0 1 ", "9 10 ", 1)
+    path = write_text(tmp_path, text + "VERTEX_SE2 20 0 0 0\n", name="islands.g2o")  # 20: isolated, ignored
     with pytest.raises(GraphError) as caught:
         read_g2o(path)
     message = str(caught.value)
     assert message.startswith(f"{path}: ")
-    assert "3 connected components: {0..1} (2 poses), {5..7} (3 poses), {9} (1 pose)" in message
+    assert "3 connected components: {0..1} (2 poses), {5..7} (3 poses), {9..10} (2 poses)" in message
+
+
+@pytest.mark.parametrize("file_fixes", ["", "FIX 3\n"], ids=["no-fix", "fix"])
+def test_vertices_without_edges_are_held_fixed_with_a_warning(tmp_path, file_fixes):
+    # Kimera-RPGO style: vertices 0 and 9 are defined but no edge touches them.
+    text = V2 + "VERTEX_SE2 9 5 5 1\n" + E2.replace("0 1 ", "3 4 ", 1) + E2.replace("0 1 ", "4 5 ", 1) + file_fixes
+    path = write_text(tmp_path, text)
+    with pytest.warns(EgncWarning, match=r"2 vertices that no edge touches .*: \{0, 9\}"):
+        graph = read_g2o(path)
+    np.testing.assert_array_equal(graph.vertex_ids, [0, 3, 4, 5, 9])
+    # Isolated ones fixed; the gauge stays on the connected part: the file's FIX, else its lowest id.
+    np.testing.assert_array_equal(graph.fixed, [True, True, False, False, True])
+    np.testing.assert_array_equal(graph.poses[-1], [5, 5, 1])
+
+
+def test_duplicate_edges_and_odometry_in_either_direction(tmp_path):
+    reversed_edge = E2.replace("0 1 1 0 0", "1 0 -1 0 0", 1)
+    graph = read_g2o(write_text(tmp_path, V2 + V2B + E2 + reversed_edge + E2))
+    np.testing.assert_array_equal(graph.is_duplicate, [False, True, True])
+    np.testing.assert_array_equal(graph.is_odometry, [True, True, True])  # either direction
+
+
+# --- Numbers: one grammar, range checks ----------------------------------------------------------
+
+STRICT_NUMBER_CASES = {
+    "underscore": ("1_0", "expected a number"),
+    "leading plus": ("+3", "expected a number"),
+    "arabic-indic digit": ("\u0663", "character U+0663"),
+    "file separator": ("1\x1c0", "character U+001C"),
+    "line separator": ("1\u20280", "character U+2028"),
+    "vertical tab": ("1\x0b0", "character U+000B"),
+    "hex": ("0x10", "expected a number"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(STRICT_NUMBER_CASES))
+def test_numbers_follow_one_strict_grammar(case, tmp_path):
+    token, fragment = STRICT_NUMBER_CASES[case]
+    path = write_text(tmp_path, V2 + f"VERTEX_SE2 1 {token} 0 0\n" + E2)
+    with pytest.raises(G2oFormatError) as caught:
+        read_g2o(path)
+    assert str(caught.value).startswith(f"{path}:2: ") and fragment in str(caught.value)
+
+
+def test_accepted_number_forms(tmp_path):
+    text = "VERTEX_SE2 0 1e+05 -2.5E-3 .5\nVERTEX_SE2 -1 7. -0 1e5\t# unicode in a comment: \u2028 \u0663\n"
+    graph = read_g2o(write_text(tmp_path, text + E2.replace("0 1 ", "-1 0 ", 1)))
+    np.testing.assert_array_equal(graph.poses, [[7.0, -0.0, 1e5], [1e5, -2.5e-3, 0.5]])
+
+
+@pytest.mark.parametrize("component", ["1e300", "-2e200"])
+def test_quaternion_too_large_to_normalize_is_a_format_error(component, tmp_path):
+    path = write_text(tmp_path, V3 + f"VERTEX_SE3:QUAT 1 0 0 0 0 {component} 0 1\n" + E3)
+    with pytest.raises(G2oFormatError, match="too large"):
+        read_g2o(path)
+
+
+# --- Information matrices: strict, nearest-pd, diagonal -----------------------------------------
+
+INDEFINITE = E2.replace("1.0 0.0 0.0 1.0", "1.0 2.0 0.0 1.0", 1)  # [[1, 0, 0], [0, 1, 2], [0, 2, 1]]
+
+
+def test_strict_information_error_names_the_repair_option(tmp_path):
+    with pytest.raises(G2oFormatError, match="--information nearest-pd or diagonal"):
+        read_g2o(write_text(tmp_path, V2 + V2B + INDEFINITE + E2))
+
+
+@pytest.mark.parametrize("mode", ["nearest-pd", "diagonal"])
+def test_information_repair_changes_only_the_bad_matrices(tmp_path, mode):
+    path = write_text(tmp_path, V2 + V2B + INDEFINITE + E2.replace("0 1 ", "1 2 ", 1))
+    with pytest.warns(EgncWarning, match=f"repaired 1 of 2 information matrices .*{mode}.*line 3") as caught:
+        graph = read_g2o(path, information=mode)
+    assert len(caught) == 1
+    np.testing.assert_array_equal(graph.information[1], np.eye(3))
+    repaired = graph.information[0]
+    assert np.linalg.eigvalsh(repaired)[0] > 0
+    if mode == "diagonal":
+        np.testing.assert_array_equal(repaired, np.eye(3))
+    else:  # eigenvalues 1, 3, -1 -> 1, 3, 3e-6: the negative direction clipped, the others kept
+        np.testing.assert_allclose(np.linalg.eigvalsh(repaired), [3e-6, 1, 3], rtol=1e-9, atol=1e-15)
+
+
+def test_diagonal_repair_refuses_a_non_positive_diagonal(tmp_path):
+    text = V2 + V2B + E2.replace("1.0 0.0 0.0 1.0 0.0 1.0", "1.0 0.0 0.0 -1.0 0.0 1.0", 1)
+    with pytest.raises(G2oFormatError, match="cannot repair"):
+        read_g2o(write_text(tmp_path, text), information="diagonal")
+
+
+def test_cubicle_reads_with_nearest_pd(dataset_path):
+    with pytest.warns(EgncWarning, match="repaired 5021 of 16869 information matrices"):
+        graph = read_g2o(dataset_path("cubicle.g2o"), information="nearest-pd")
+    assert (np.linalg.eigvalsh(graph.information)[:, 0] > 0).all()
 
 
 # --- Writing ----------------------------------------------------------------------------------
@@ -345,6 +450,38 @@ def test_failed_replace_removes_temporary(tiny_graph, tmp_path, monkeypatch):
     with pytest.raises(EgncError, match=r"new\.g2o: cannot write file: replace refused"):
         write_g2o(tiny_graph, tmp_path / "new.g2o")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["graph.g2o"]
+
+
+def test_all_or_nothing_renames_only_when_every_file_is_written(tiny_graph, tmp_path):
+    first, second = tmp_path / "first.g2o", tmp_path / "second.g2o"
+    first.write_text("old first\n")
+    with pytest.raises(RuntimeError, match="second failed"), atomic_module.all_or_nothing():
+        write_g2o(tiny_graph, first)
+        assert first.read_text() == "old first\n"  # written to a temporary, not renamed yet
+        with atomic_module.atomic_text_file(second) as out:
+            out.write("partial")
+            raise RuntimeError("second failed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["first.g2o", "graph.g2o"]
+    assert first.read_text() == "old first\n"
+
+    with atomic_module.all_or_nothing():
+        write_g2o(tiny_graph, first)
+        write_g2o(tiny_graph, second)
+    assert read_g2o(first).num_edges == read_g2o(second).num_edges == tiny_graph.num_edges
+
+
+def test_interruption_during_the_renames_is_ignored(tiny_graph, tmp_path, monkeypatch):
+    replace = atomic_module._replace
+
+    def interrupted_replace(temporary, path):
+        os.kill(os.getpid(), signal.SIGINT)  # would raise KeyboardInterrupt if it were delivered
+        replace(temporary, path)
+
+    monkeypatch.setattr(atomic_module, "_replace", interrupted_replace)
+    with atomic_module.all_or_nothing():
+        write_g2o(tiny_graph, tmp_path / "a.g2o")
+        write_g2o(tiny_graph, tmp_path / "b.g2o")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.g2o", "b.g2o", "graph.g2o"]
 
 
 def test_non_finite_graph_is_not_written(tiny_graph, tmp_path):

@@ -186,6 +186,13 @@ BAD_INPUTS = {
     "indefinite covariance": (
         HEADER + "ODOMETRY 1 0 0 1 1.0 0.0 0.0 1 0 0 0 -1 0 0 0 1\n", 6, "not symmetric positive definite"
     ),
+    "covariance whose inverse overflows": (
+        HEADER + "ODOMETRY 1 0 0 1 1.0 0.0 0.0 5e-324 0 0 0 5e-324 0 0 0 5e-324\n", 6, "inverse .* overflows"
+    ),
+    "underscore in a number": (HEADER + f"ODOMETRY 1 0 0 1 1_0 0.0 0.0 {COV2}\n", 6, "field 5 is '1_0'"),
+    "leading plus": (HEADER + f"ODOMETRY 1 0 0 1 +1 0.0 0.0 {COV2}\n", 6, "field 5 is '[+]1'"),
+    "plus on an id": (HEADER + f"ODOMETRY 1 0 0 +1 1 0.0 0.0 {COV2}\n", 6, "non-negative integer"),
+    "unicode separator": (HEADER + f"ODOMETRY 1 0 0 1 1\u2028 0.0 0.0 {COV2}\n", 6, "character U[+]2028"),
     "no entries": (HEADER + f"PRIOR 1 0 0 0 0 0 {COV2}\n", None, "no ODOMETRY or LOOP"),
     "truncated": (HEADER + "ODOMETRY 1 0 0 1 1.0 0.0 0.0 0.1 0.0", 6, "truncated"),
 }

@@ -1,15 +1,17 @@
 """`egnc-solve`: optimize a g2o pose graph from the command line.
 
-Exit codes: 0 success; 1 an error about the input or the solve (one line on stderr);
-2 bad command-line usage (argparse).
+Exit codes: 0 success; 1 an error about the input, the solve or an output (one line on stderr,
+no output written); 2 bad command-line usage (argparse); 3 numerical failure (the solve produced
+non-finite numbers, or the problem cannot be represented in double precision; one line, no
+output); 130 / 143 interrupted by SIGINT / SIGTERM (one line, no output).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -17,11 +19,22 @@ import numpy as np
 
 from egnc import __version__
 from egnc.api import METHODS, Result, StageReport, solve
-from egnc.errors import EgncError
-from egnc.io import read_g2o, write_g2o
-from egnc.io.atomic import atomic_text_file
+from egnc.cli.outputs import OutputPlan
+from egnc.cli.report import report_dict, summary
+from egnc.cli.signals import INTERRUPT_EXIT_CODES, Terminated, sigterm_raises
+from egnc.errors import EgncError, EgncWarning, NumericalError
+from egnc.graph import PoseGraph
+from egnc.io import read_g2o
+from egnc.io.edge_roles import read_known_inliers
+from egnc.io.information import INFORMATION_MODES
+from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import SolverOptions
-from egnc.plot import plot_trajectory, require_matplotlib, save_figure
+
+EXIT_NUMERICAL_FAILURE = 3
+"""Exit code when the solve fails numerically (documented in the README)."""
+
+NUMERICAL_FAILURE_STATUS = 5
+"""`Result.status` of a solve that produced non-finite numbers (`egnc.least_squares`)."""
 
 EXAMPLES = """examples:
   egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o
@@ -29,9 +42,12 @@ EXAMPLES = """examples:
   egnc-solve graph.g2o --drop-outliers -o inliers_only.g2o
   egnc-solve graph.g2o --method l2 --linear-solver scipy
   egnc-solve graph.g2o --plot trajectory.png
+  egnc-solve graph.g2o --trajectory solved.tum --edges edges.csv
+  egnc-solve cubicle.g2o --information nearest-pd --known-inliers odometry
 
 exit codes: 0 success; 1 error in the input, the solve or an output (one line on stderr, no
-partial output file); 2 bad command-line usage.
+output written); 2 bad command-line usage; 3 numerical failure (no output written);
+130 / 143 interrupted by SIGINT / SIGTERM (no output written).
 """
 
 
@@ -53,9 +69,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--known-inliers",
-        choices=("odometry", "none"),
         default="odometry",
-        help="edges never rejected: odometry (consecutive ids, default) or none",
+        metavar="{odometry,none,FILE}",
+        help="edges never rejected: odometry (consecutive ids in either direction, default), none, or a FILE of"
+        " edge indices (whitespace separated, # comments) or an egnc labels JSON (every edge it does not list"
+        " as an outlier)",
+    )
+    parser.add_argument(
+        "--information",
+        choices=INFORMATION_MODES,
+        default="strict",
+        help="information matrices that are not positive definite: strict (default) refuses the file,"
+        " nearest-pd clips their eigenvalues, diagonal keeps their diagonal (one warning with the count)",
     )
     parser.add_argument(
         "--drop-outliers", action="store_true", help="write the output graph without the rejected loop closures"
@@ -70,7 +95,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--max-iters", type=_non_negative_int, default=100, help="maximum solver iterations (default 100)"
     )
-    parser.add_argument("--skip-unknown", action="store_true", help="ignore lines with unknown g2o tags")
+    parser.add_argument(
+        "--skip-unknown",
+        action="store_true",
+        help="skip lines with g2o tags egnc does not read (landmarks, parameters, ...); -o writes them back unchanged",
+    )
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument(
         "--plot",
@@ -78,7 +107,18 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PNG",
         help="draw the initial guess, the result and the accepted/rejected loop closures here (needs egnc[plot])",
     )
-    parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    parser.add_argument(
+        "--trajectory", type=Path, metavar="FILE", help="write the optimized poses here, TUM (.tum) or KITTI (.kitti)"
+    )
+    parser.add_argument(
+        "--trajectory-format",
+        choices=TRAJECTORY_FORMATS,
+        help="format of --trajectory when its suffix does not say (e.g. .txt)",
+    )
+    parser.add_argument(
+        "--edges", type=Path, metavar="CSV", help="write one CSV row per edge: index,i,j,kind,r,weight,mu,inlier"
+    )
+    parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success but warnings")
     parser.add_argument("--version", action="version", version=f"egnc {__version__}")
     return parser
 
@@ -92,65 +132,6 @@ def _non_negative_int(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
     return value
-
-
-def report_dict(result: Result) -> dict:
-    """The JSON report of a solve (documented in the README)."""
-    graph = result.graph
-    return {
-        "method": result.method,
-        "linear_solver": result.linear_solver,
-        "time_s": result.time_s,
-        "initial_cost": result.initial_cost,
-        "final_cost": result.cost,
-        "iterations": result.iterations,
-        "status": result.status,
-        "message": result.message,
-        "converged": result.converged,
-        "poses": graph.num_poses,
-        "edges": graph.num_edges,
-        "loop_closures": int(graph.is_loop_closure.sum()),
-        "known_inliers": int(result.known_inliers.sum()),
-        "rejected_edges": result.rejected_edges.tolist(),
-        "stages": [
-            {
-                "mu_min": _finite_or_none(stage.mu_min),
-                "mu_mean": _finite_or_none(stage.mu_mean),
-                "mu_max": _finite_or_none(stage.mu_max),
-                "iterations": stage.iterations,
-                "cost": stage.cost,
-                "time_s": stage.time_s,
-                "status": stage.status,
-                "active_edges": stage.active_edges,
-            }
-            for stage in result.stages
-        ],
-        "timings_s": result.timings,
-    }
-
-
-def _finite_or_none(value: float) -> float | None:
-    """JSON has no NaN: statistics that do not apply become null."""
-    return value if math.isfinite(value) else None
-
-
-def summary(result: Result) -> str:
-    """A short human-readable summary of a solve."""
-    graph = result.graph
-    accepted_cost = 0.5 * float(np.sum(result.residual_norms[result.inliers] ** 2))
-    return "\n".join(
-        [
-            f"poses {graph.num_poses}, edges {graph.num_edges}, loop closures {int(graph.is_loop_closure.sum())}"
-            f" ({graph.dim}D)",
-            f"method {result.method}, linear solver {result.linear_solver}",
-            f"least-squares cost {result.initial_cost:.10g} -> {result.cost:.10g} over all edges,"
-            f" {accepted_cost:.10g} over the accepted ones",
-            f"{len(result.stages)} stages, {result.iterations} iterations ({result.message})",
-            f"rejected {len(result.rejected_edges)} of {int((~result.known_inliers).sum())} loop closures"
-            f" (candidates: edges not known inliers)",
-            f"time {result.time_s:.3f} s",
-        ]
-    )
 
 
 def _print_stage_progress() -> Callable[[StageReport], None]:
@@ -172,39 +153,97 @@ def _print_stage_progress() -> Callable[[StageReport], None]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of `egnc-solve`; returns the process exit code."""
+    """Entry point of `egnc-solve`; returns the process exit code (module docstring)."""
     args = build_parser().parse_args(argv)
-    written: list[Path] = []
+    plan = OutputPlan(
+        graph=args.output,
+        report=args.report,
+        plot=args.plot,
+        trajectory=args.trajectory,
+        trajectory_format=args.trajectory_format,
+        edges=args.edges,
+        drop_outliers=args.drop_outliers,
+    )
     try:
-        if args.plot is not None:  # fail before a long solve, not after it
-            require_matplotlib()
-        graph = read_g2o(args.input, skip_unknown=args.skip_unknown)
+        with sigterm_raises():
+            result, written = _run(args, plan)
+    except NumericalError as error:
+        print(f"egnc-solve: numerical failure: {error}", file=sys.stderr)
+        return EXIT_NUMERICAL_FAILURE
+    except EgncError as error:
+        print(f"egnc-solve: error: {error}", file=sys.stderr)
+        return 1
+    except (KeyboardInterrupt, Terminated) as interruption:
+        code, what = INTERRUPT_EXIT_CODES[type(interruption)]
+        print(f"egnc-solve: {what}; no output written", file=sys.stderr)
+        return code
+    if not args.quiet:
+        print(summary(result, written))
+    return 0
+
+
+def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]]:
+    """Check the outputs, read, solve, write: the work of `main` between its error handlers."""
+    plan.check(args.input)  # before a long read and solve, not after them
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        graph = read_g2o(args.input, skip_unknown=args.skip_unknown, information=args.information)
+        known_inliers = _known_inliers(args.known_inliers, graph)
+        read_notes = _warning_notes(caught) + _duplicate_note(graph, args.input)
+        _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
+        read_count = len(caught)
         result = solve(
             graph,
             args.method,
-            known_inliers=args.known_inliers,
+            known_inliers=known_inliers,
             linear_solver=args.linear_solver,
             options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
             on_stage=None if args.quiet else _print_stage_progress(),
         )
-        if args.output is not None:
-            write_g2o(result.graph, args.output, keep_edges=result.inliers if args.drop_outliers else None)
-            written.append(args.output)
-        if args.report is not None:
-            with atomic_text_file(args.report) as out:
-                out.write(json.dumps(report_dict(result), indent=2) + "\n")
-            written.append(args.report)
-        if args.plot is not None:
-            save_figure(plot_trajectory(result, initial=graph), args.plot)
-    except EgncError as error:
-        # A failed run leaves no output behind, not even a graph written before the report failed.
-        for path in written:
-            path.unlink(missing_ok=True)
-        print(f"egnc-solve: error: {error}", file=sys.stderr)
-        return 1
-    if not args.quiet:
-        print(summary(result))
-    return 0
+    _require_finite(result, args.input)
+    report = report_dict(result, read_notes + _warning_notes(caught[read_count:]))
+    _print_warnings(report["warnings"][len(read_notes) :])  # the solve's, the result's, the report's
+    return result, plan.write(result, graph, report)
+
+
+def _warning_notes(caught: list[warnings.WarningMessage]) -> list[str]:
+    """One line per `EgncWarning`; other warnings (NumPy's overflow notices, ...) summed up in one line."""
+    notes = [str(warning.message) for warning in caught if issubclass(warning.category, EgncWarning)]
+    others = [warning for warning in caught if not issubclass(warning.category, EgncWarning)]
+    if others:
+        first = f"{others[0].category.__name__}: {others[0].message}"
+        notes.append(f"{len(others)} warnings from the libraries egnc uses; the first: {first}")
+    return notes
+
+
+def _duplicate_note(graph: PoseGraph, input_path: Path) -> list[str]:
+    """The warning about duplicate edges, if the graph has any (`PoseGraph.is_duplicate`)."""
+    duplicates = int(graph.is_duplicate.sum())
+    if not duplicates:
+        return []
+    return [
+        f"{input_path}: {duplicates} duplicate edges (the same two vertices as an earlier edge, in either "
+        "direction); all are kept and solved"
+    ]
+
+
+def _known_inliers(choice: str, graph: PoseGraph) -> str | np.ndarray:
+    """`--known-inliers`: `odometry`, `none`, or a file read by `egnc.io.edge_roles`."""
+    return choice if choice in ("odometry", "none") else read_known_inliers(choice, graph.num_edges)
+
+
+def _require_finite(result: Result, input_path: Path) -> None:
+    """Raise `NumericalError` for a solve the library marked as a numerical failure or that is not finite."""
+    if result.status == NUMERICAL_FAILURE_STATUS:
+        raise NumericalError(f"{input_path}: {result.message}")
+    if not (np.isfinite(result.graph.poses).all() and np.isfinite(result.residual_norms).all()):
+        raise NumericalError(f"{input_path}: the solution holds non-finite numbers ({result.message})")
+
+
+def _print_warnings(notes: list[str]) -> None:
+    """Each warning as one `warning: ...` line on stderr."""
+    for note in notes:
+        print(f"warning: {note}", file=sys.stderr, flush=True)
 
 
 if __name__ == "__main__":

@@ -1,15 +1,29 @@
-"""Atomic file output: a file egnc writes is either complete or not there at all."""
+"""Atomic file output: a file egnc writes is either complete or not there at all.
+
+Each file is written to a temporary `.NAME.<pid>.<hex>.tmp` beside it, flushed to disk and renamed
+over `NAME`. Inside `all_or_nothing()`, the renames wait until every file of the block is written,
+so a failure anywhere leaves all previous files untouched. A run killed before its rename
+(SIGKILL, power loss) leaves its temporary behind; the next write to the same place removes the
+temporaries of processes that no longer exist.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
+import re
 import secrets
+import signal
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
 from egnc.errors import EgncError
+
+_pending: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.ContextVar("_pending", default=None)
+"""`(temporary, path)` renames deferred by the innermost `all_or_nothing` block, or None outside one."""
 
 
 def atomic_text_file(path: Path) -> contextlib.AbstractContextManager[TextIO]:
@@ -27,8 +41,92 @@ def atomic_binary_file(path: Path) -> contextlib.AbstractContextManager[BinaryIO
 
 
 @contextlib.contextmanager
+def all_or_nothing() -> Iterator[None]:
+    """Defer the renames of every atomic file written in the block until the block succeeds.
+
+    On success all files appear (renamed with SIGINT and SIGTERM ignored, so an interruption
+    cannot stop half-way); on any exception before that, interruptions included,
+    every temporary is removed and no file is replaced.
+    """
+    renames: list[tuple[Path, Path]] = []
+    token = _pending.set(renames)
+    try:
+        yield
+        with _signals_held():
+            for temporary, path in renames:
+                _replace(temporary, path)
+    except BaseException:
+        for temporary, _ in renames:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(temporary)
+        raise
+    finally:
+        _pending.reset(token)
+
+
+def remove_stale_temporaries(path: Path) -> list[Path]:
+    """Remove the temporaries of `path` left by processes that are no longer running.
+
+    Returns:
+        The removed files.
+    """
+    pattern = re.compile(rf"\.{re.escape(path.name)}\.(\d+)\.[0-9a-f]+\.tmp")
+    removed = []
+    with contextlib.suppress(OSError), os.scandir(path.parent) as entries:
+        for entry in entries:
+            match = pattern.fullmatch(entry.name)
+            if match and not _process_exists(int(match.group(1))):
+                with contextlib.suppress(OSError):
+                    os.unlink(entry.path)
+                    removed.append(Path(entry.path))
+    return removed
+
+
+def _process_exists(pid: int) -> bool:
+    """Whether a process with this id is running (signal 0 checks without sending anything)."""
+    try:
+        os.kill(pid, 0)
+    except PermissionError:  # another user's process
+        return True
+    except (ProcessLookupError, OverflowError):
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Ignore SIGINT and SIGTERM during the block.
+
+    The block is a few renames: once they start, finishing them (and the run) is the only way to
+    leave no mix of old and new files, so an interruption in those milliseconds is not acted on.
+    Python handlers are replaced rather than the signals masked, because a masked signal is still
+    delivered to another thread (NumPy's BLAS workers), and only the main thread can do that; in
+    other threads the block runs unprotected.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {number: signal.signal(number, signal.SIG_IGN) for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            if handler is not None:  # None: installed from C, cannot be restored from Python
+                signal.signal(number, handler)
+
+
+def _replace(temporary: Path, path: Path) -> None:
+    """Rename the finished temporary over `path`."""
+    try:
+        os.replace(temporary, path)
+    except OSError as error:
+        raise EgncError(f"{path}: cannot write file: {error.strerror or error}") from None
+
+
+@contextlib.contextmanager
 def _atomic_file(path: Path, mode: str, encoding: str | None = None, newline: str | None = None) -> Iterator:
-    """The one implementation: temporary file beside `path`, fsync, `os.replace`, cleanup on failure."""
+    """The one implementation: temporary file beside `path`, fsync, then `os.replace` (now or deferred)."""
+    remove_stale_temporaries(path)
     temporary = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
         # os.open with mode 0o666 lets the umask decide permissions, as for a plain open().
@@ -40,7 +138,11 @@ def _atomic_file(path: Path, mode: str, encoding: str | None = None, newline: st
             yield out
             out.flush()
             os.fsync(out.fileno())
-        os.replace(temporary, path)
+        renames = _pending.get()
+        if renames is None:
+            _replace(temporary, path)
+        else:
+            renames.append((temporary, path))
     except OSError as error:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(temporary)

@@ -1,6 +1,7 @@
 """Read and write pose graphs in the g2o text format.
 
-One record per line, fields separated by whitespace; blank lines and `#` comments are ignored:
+One record per line, fields separated by ASCII spaces or tabs; blank lines and `#` comments are
+ignored; numbers follow the grammar of `egnc.io.numbers`:
 
 - `VERTEX_SE2 id x y theta`
 - `EDGE_SE2 i j dx dy dtheta` + 6 information entries
@@ -19,18 +20,24 @@ line get their initial guess from `egnc.initialize`.
 
 from __future__ import annotations
 
+import collections
 import itertools
 import os
+import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
-from egnc.connectivity import require_connected
-from egnc.errors import G2oFormatError, GraphError
+from egnc.connectivity import describe_ids, hold_isolated_fixed, isolated_vertices, require_connected
+from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
+from egnc.io.information import INFORMATION_MODES, InformationMode, not_positive_definite, repair_information
+from egnc.io.numbers import check_line_characters, is_float, is_integer, parse_floats
 from egnc.io.text import read_text
 
 _MIN_QUATERNION_NORM = 1e-6
@@ -68,6 +75,8 @@ _EDGE_TAGS = {
 }
 _TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values())}
 _FIX = "FIX"
+_TAG_NAME = re.compile(r"[A-Z][A-Z0-9_:]*", re.IGNORECASE)
+"""What a record tag looks like (`VERTEX_XY`, `PARAMS_SE3OFFSET`, ...): anything else is damage, never skipped."""
 
 
 @dataclass
@@ -93,30 +102,44 @@ class _Context:
         return G2oFormatError(message, self.path, line)
 
 
-def read_g2o(path: str | os.PathLike, *, skip_unknown: bool = False) -> PoseGraph:
+def read_g2o(
+    path: str | os.PathLike, *, skip_unknown: bool = False, information: InformationMode = "strict"
+) -> PoseGraph:
     """Read a 2D or 3D g2o file into a `PoseGraph`.
 
     Args:
         path: the `.g2o` file.
         skip_unknown: ignore lines with tags other than the ones above (landmarks, parameters,
-            ...) instead of raising.
+            ...) instead of raising; they are kept verbatim in `PoseGraph.unknown_lines`, and
+            `write_g2o` writes them back.
+        information: what to do with information matrices that are not positive definite:
+            `"strict"` raises, `"nearest-pd"` or `"diagonal"` repair them
+            (`egnc.io.information`).
 
     Returns:
         The graph, vertex ids sorted ascending, edges in file order. Vertices referenced by edges
         but without a VERTEX line get their pose from `egnc.initialize.initialize_poses`.
+        Vertices that no edge touches are held fixed (see `hold_isolated_fixed`).
+
+    Warns:
+        EgncWarning: one per kind of accepted oddity: skipped lines (count per tag), repaired
+            information matrices (count, largest change), vertices without edges.
 
     Raises:
         G2oFormatError: the file cannot be read or is malformed; names the file and line.
         GraphError: the file is well formed but its graph is disconnected.
     """
+    if information not in INFORMATION_MODES:
+        raise EgncError(f"information must be one of {', '.join(INFORMATION_MODES)}, got {information!r}")
     path = Path(path)
     text = read_text(path)
     lines = text.split("\n")
     context = _Context(path, text, len(lines))
-    dim, vertices, edges, fixes = _split_records(lines, context, skip_unknown)
+    dim, vertices, edges, fixes, unknown = _split_records(lines, context, skip_unknown)
     if dim is None or not edges.rows:
         raise context.error("no EDGE_SE2 or EDGE_SE3:QUAT lines: a pose graph needs edges")
 
+    notes = [_describe_skipped(path, unknown)] if unknown else []
     vertex_tag, edge_tag = _VERTEX_TAGS[dim], _EDGE_TAGS[dim]
     vertex_ids, vertex_values = _to_arrays(vertices, vertex_tag, context)
     edge_ids, edge_values = _to_arrays(edges, edge_tag, context)
@@ -125,7 +148,7 @@ def read_g2o(path: str | os.PathLike, *, skip_unknown: bool = False) -> PoseGrap
     edge_lines = np.asarray(edges.lines, dtype=np.int64)
     p, d = POSE_SIZE[dim], TANGENT_SIZE[dim]
     measurements = edge_values[:, :p]
-    information = _information_from_upper(edge_values[:, p:], d)
+    information_matrices = _information_from_upper(edge_values[:, p:], d)
 
     _check_finite(vertex_values, vertex_lines, vertex_tag, 1 + vertex_tag.num_ids, context)
     _check_finite(edge_values, edge_lines, edge_tag, 1 + edge_tag.num_ids, context)
@@ -134,31 +157,46 @@ def read_g2o(path: str | os.PathLike, *, skip_unknown: bool = False) -> PoseGrap
         _check_quaternions(measurements[:, 3:7], edge_lines, context)
     _check_unique_vertices(vertex_ids, vertex_lines, context)
     _check_no_self_edges(edge_ids, edge_lines, context)
-    _check_positive_definite(information, edge_lines, context)
+    information_matrices, repair_note = _positive_definite(information_matrices, edge_lines, information, context)
+    notes += [repair_note] if repair_note else []
 
     all_ids = np.unique(np.concatenate((vertex_ids, edge_ids.ravel())))
     fixed = _fixed_mask(fixes, all_ids, context)
     edge_rows = np.searchsorted(all_ids, edge_ids)
-    require_connected(all_ids, edge_rows, source=str(path))
+    isolated = isolated_vertices(len(all_ids), edge_rows)
+    require_connected(all_ids, edge_rows, source=str(path), ignore=isolated)
+    if isolated.any():
+        fixed = hold_isolated_fixed(fixed, isolated)
+        notes.append(
+            f"{path}: {int(isolated.sum())} vertices that no edge touches are kept unchanged and not optimized: "
+            f"{describe_ids(all_ids[isolated])}"
+        )
 
     poses = np.zeros((len(all_ids), p))
     known = np.zeros(len(all_ids), dtype=bool)
     vertex_rows = np.searchsorted(all_ids, vertex_ids)
     poses[vertex_rows] = vertex_values
     known[vertex_rows] = True
-    if not known.all():
-        poses = initialize_poses(dim, edge_rows, measurements, poses=poses, known=known)
+    if not known.all():  # isolated vertices are known (they have VERTEX lines): initialize the rest
+        rows = np.flatnonzero(~isolated)
+        poses[rows] = initialize_poses(
+            dim, np.searchsorted(rows, edge_rows), measurements, poses=poses[rows], known=known[rows]
+        )
 
-    return PoseGraph(
+    graph = PoseGraph(
         dim=dim,
         vertex_ids=all_ids,
         poses=poses,
         edges=edge_rows,
         measurements=measurements,
-        information=information,
+        information=information_matrices,
         fixed=fixed,
         edge_lines=edge_lines,
+        unknown_lines=tuple(unknown),
     )
+    for note in notes:
+        warnings.warn(note, EgncWarning, stacklevel=2)
+    return graph
 
 
 def write_g2o(
@@ -166,9 +204,10 @@ def write_g2o(
 ) -> None:
     """Write a graph as g2o text, atomically: the file is complete or untouched.
 
-    Vertices are written in id order, then FIX lines, then edges in graph order. Floats are written
-    with `repr`, so reading the file back gives bit-identical arrays. Only the upper triangle of
-    each information matrix is written (the g2o convention).
+    Vertices are written in id order, then FIX lines, then `graph.unknown_lines` (landmarks,
+    parameters, ... skipped by `read_g2o`, verbatim and in file order), then edges in graph order.
+    Floats are written with `repr`, so reading the file back gives bit-identical arrays. Only the
+    upper triangle of each information matrix is written (the g2o convention).
 
     Args:
         graph: the graph to write.
@@ -192,6 +231,7 @@ def write_g2o(
     with atomic_text_file(Path(path)) as out:
         out.write(_format_records(vertex_tag.name, graph.vertex_ids[:, None], graph.poses))
         out.write("".join(f"{_FIX} {i}\n" for i in graph.vertex_ids[graph.fixed].tolist()))
+        out.write("".join(f"{line}\n" for line in graph.unknown_lines))
         edge_values = np.concatenate(
             (graph.measurements[keep], graph.information[keep][:, rows_upper, cols_upper]), axis=1
         )
@@ -200,18 +240,23 @@ def write_g2o(
 
 def _split_records(
     lines: list[str], context: _Context, skip_unknown: bool
-) -> tuple[int | None, _Records, _Records, _Records]:
-    """Group the fields of each line by record type, checking tags and field counts.
+) -> tuple[int | None, _Records, _Records, _Records, list[str]]:
+    """Group the fields of each line by record type, checking characters, tags and field counts.
 
     Returns:
-        `(dim, vertices, edges, fixes)`; `dim` is None when the file has no vertex or edge line.
+        `(dim, vertices, edges, fixes, unknown)`; `dim` is None when the file has no vertex or
+        edge line; `unknown` holds the lines with other tags, verbatim (only with `skip_unknown`).
     """
     vertices, edges, fixes = _Records([], []), _Records([], []), _Records([], [])
+    unknown: list[str] = []
     dim = None
     first_line = 0
-    for line_number, line in enumerate(lines, start=1):
-        if "#" in line:
-            line = line[: line.index("#")]
+    for line_number, raw_line in enumerate(lines, start=1):
+        raw_line = raw_line.removesuffix("\r")  # CRLF files
+        line = raw_line.partition("#")[0]
+        problem = check_line_characters(line)
+        if problem:
+            raise context.error(problem, line_number)
         fields = line.split()
         if not fields:
             continue
@@ -223,10 +268,14 @@ def _split_records(
                     raise context.error("FIX needs at least one vertex id", line_number)
                 fixes.rows.append(fields)
                 fixes.lines.append(line_number)
-            elif not skip_unknown:
+            elif not _TAG_NAME.fullmatch(name):
+                raise context.error(f"line starts with {name!r}, which is not a record tag", line_number)
+            elif skip_unknown:
+                unknown.append(raw_line)
+            else:
                 raise context.error(
                     f"unknown tag {name!r}; "
-                    "pass skip_unknown=True / --skip-unknown to ignore such lines",
+                    "pass skip_unknown=True / --skip-unknown to skip such lines (they are written back with -o)",
                     line_number,
                 )
             continue
@@ -247,54 +296,54 @@ def _split_records(
         records = vertices if tag.kind == "vertex" else edges
         records.rows.append(fields)
         records.lines.append(line_number)
-    return dim, vertices, edges, fixes
+    return dim, vertices, edges, fixes, unknown
+
+
+def _describe_skipped(path: Path, unknown: list[str]) -> str:
+    """One sentence: how many lines of which tags were skipped."""
+    counts = collections.Counter(line.split()[0] for line in unknown)
+    tags = ", ".join(f"{tag} {count}" for tag, count in counts.most_common())
+    return (
+        f"{path}: skipped {len(unknown)} lines with tags egnc does not read ({tags}); "
+        "write_g2o (egnc-solve -o) writes them back unchanged"
+    )
 
 
 def _to_arrays(records: _Records, tag: _Tag, context: _Context) -> tuple[np.ndarray, np.ndarray]:
-    """Convert validated rows to `(n, num_ids)` int64 ids and `(n, num_values)` float64 values."""
+    """Convert rows to `(n, num_ids)` int64 ids and `(n, num_values)` float64 values (`egnc.io.numbers`)."""
     n, k = len(records.rows), 1 + tag.num_ids
-    try:
-        ids = np.array([row[1:k] for row in records.rows], dtype=np.int64).reshape(n, tag.num_ids)
-        flat = itertools.chain.from_iterable(row[k:] for row in records.rows)
-        values = np.array(list(map(float, flat)), dtype=np.float64).reshape(n, tag.num_values)
-    except (ValueError, OverflowError):
+    id_tokens = list(itertools.chain.from_iterable(row[1:k] for row in records.rows))
+    values = parse_floats(list(itertools.chain.from_iterable(row[k:] for row in records.rows)))
+    if values is None or not all(map(is_integer, set(id_tokens))):
         _raise_first_bad_field(records, tag, context)
-        raise  # unreachable: the scan above always finds the culprit
-    return ids, values
+    try:
+        ids = np.array(id_tokens, dtype=np.int64).reshape(n, tag.num_ids)
+    except OverflowError:
+        _raise_first_bad_field(records, tag, context)
+    assert values is not None  # _raise_first_bad_field always raises
+    return ids, values.reshape(n, tag.num_values)
 
 
-def _raise_first_bad_field(records: _Records, tag: _Tag, context: _Context) -> None:
+def _raise_first_bad_field(records: _Records, tag: _Tag, context: _Context) -> NoReturn:
     """Find the first field that is not a valid id or number and raise for its line."""
     for row, line_number in zip(records.rows, records.lines):
         for position, token in enumerate(row[1:], start=1):
             if position <= tag.num_ids:
                 _parse_id(token, tag.name, position, line_number, context)
-            elif not _is_float(token):
+            elif not is_float(token):
                 raise context.error(
                     f"{tag.name} field {position} is {token!r}, expected a number", line_number
                 )
+    raise AssertionError("no bad field found")
 
 
 def _parse_id(token: str, tag_name: str, position: int, line_number: int, context: _Context) -> int:
     """Parse one vertex id, raising for its line unless it is an int64 integer."""
-    try:
-        vertex_id = int(token)
-    except ValueError:
-        vertex_id = None
-    if vertex_id is None or abs(vertex_id) > _INT64_MAX:
+    if not is_integer(token) or abs(int(token)) > _INT64_MAX:
         raise context.error(
             f"{tag_name} field {position} is {token!r}, expected an integer vertex id", line_number
         )
-    return vertex_id
-
-
-def _is_float(token: str) -> bool:
-    """Whether `float` accepts the token (the parser used on the fast path)."""
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
+    return int(token)
 
 
 def _check_finite(
@@ -312,13 +361,20 @@ def _check_finite(
 
 
 def _check_quaternions(quaternions: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject quaternions too short to normalize (stored values are otherwise kept as read)."""
-    norms = np.linalg.norm(quaternions, axis=1)
-    bad = np.flatnonzero(norms < _MIN_QUATERNION_NORM)
+    """Reject quaternions that cannot be normalized in double precision (stored values are kept as read).
+
+    Too short (norm below `_MIN_QUATERNION_NORM`, most likely corrupt) or so long that the sum of
+    squares overflows (a component above about 1e154).
+    """
+    with np.errstate(over="ignore"):
+        norms = np.sqrt(np.einsum("ij,ij->i", quaternions, quaternions))
+    bad = np.flatnonzero(~(norms >= _MIN_QUATERNION_NORM) | ~np.isfinite(norms))
     if len(bad):
+        k = bad[0]
+        problem = "too small" if norms[k] < _MIN_QUATERNION_NORM else "too large (overflows a double)"
         raise context.error(
-            f"quaternion (qx qy qz qw) has norm {norms[bad[0]]:.3g}, too small to normalize",
-            int(lines[bad[0]]),
+            f"quaternion (qx qy qz qw) = {quaternions[k].tolist()} has a norm {problem} to normalize",
+            int(lines[k]),
         )
 
 
@@ -346,22 +402,39 @@ def _check_no_self_edges(edge_ids: np.ndarray, lines: np.ndarray, context: _Cont
         )
 
 
-def _check_positive_definite(information: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject information matrices that are not numerically positive definite."""
-    eigenvalues = np.linalg.eigvalsh(information)
-    # Relative tolerance: below d * eps * largest, the smallest eigenvalue is roundoff, not data.
-    d = information.shape[-1]
-    scale = np.abs(eigenvalues).max(axis=1)
-    # Written as "not above" so that a NaN eigenvalue (overflow on huge entries) also fails.
-    bad = np.flatnonzero(~(eigenvalues[:, 0] > d * np.finfo(float).eps * scale))
-    if len(bad):
+def _positive_definite(
+    information: np.ndarray, lines: np.ndarray, mode: InformationMode, context: _Context
+) -> tuple[np.ndarray, str | None]:
+    """Check the information matrices, repairing the bad ones unless `mode` is strict.
+
+    Returns:
+        `(information, note)`: the matrices (repaired ones replaced) and the warning to emit, or
+        None when nothing was repaired.
+    """
+    bad = not_positive_definite(information)
+    if not len(bad):
+        return information, None
+    share = f"{len(bad)} of the file's {len(information)} edges are affected"
+    if mode == "strict":
         k = bad[0]
         raise context.error(
-            f"information matrix is not positive definite (eigenvalues {eigenvalues[k, 0]:.3g} "
-            f"to {eigenvalues[k, -1]:.3g}); "
-            f"{len(bad)} of the file's {len(information)} edges are affected",
+            f"information matrix is not positive definite (diagonal {np.diagonal(information[k]).tolist()}); "
+            f"{share}; --information nearest-pd or diagonal (information= in read_g2o) repairs them",
             int(lines[k]),
         )
+    information, still_bad, repair = repair_information(information, bad, mode)
+    if len(still_bad):
+        raise context.error(
+            f"information matrix is not positive definite and --information {mode} cannot repair it "
+            f"(diagonal {np.diagonal(information[still_bad[0]]).tolist()})",
+            int(lines[still_bad[0]]),
+        )
+    note = (
+        f"{context.path}: repaired {repair.count} of {len(information)} information matrices that were not "
+        f"positive definite ({mode}); largest relative change {repair.largest_change:.3g} "
+        f"(line {lines[repair.largest_index]})"
+    )
+    return information, note
 
 
 def _fixed_mask(fixes: _Records, vertex_ids: np.ndarray, context: _Context) -> np.ndarray:

@@ -57,6 +57,8 @@ from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
+from egnc.io.information import not_positive_definite
+from egnc.io.numbers import check_line_characters, format_floats, is_float, is_integer
 from egnc.io.text import read_text
 from egnc.lie import so3
 
@@ -301,12 +303,13 @@ def write_irl(log: IrlLog, path: str | os.PathLike) -> None:
     lines = [log.name, log.date, str(log.dim), "nonlinear", log.notes]
     if log.prior is not None:
         prior = log.prior
-        lines.append(f"PRIOR 1 0 {prior.vertex_id} {_numbers(prior.pose)} {_numbers(prior.covariance.ravel())}")
+        values = f"{format_floats(prior.pose)} {format_floats(prior.covariance.ravel())}"
+        lines.append(f"PRIOR 1 0 {prior.vertex_id} {values}")
     covariances = log.covariances.reshape(log.num_edges, -1)
     for k, ((i, j), odometry, outlier, null) in enumerate(
         zip(log.edge_ids.tolist(), log.is_odometry.tolist(), log.is_outlier.tolist(), log.has_null.tolist())
     ):
-        measurement = f"{_numbers(log.measurements[k])} {_numbers(covariances[k])}"
+        measurement = f"{format_floats(log.measurements[k])} {format_floats(covariances[k])}"
         if odometry:
             lines.append(f"ODOMETRY 1 0 {i} {j} {measurement}")
         elif null:
@@ -315,11 +318,6 @@ def write_irl(log: IrlLog, path: str | os.PathLike) -> None:
             lines.append(f"LOOP 1 0 {i} {j} {measurement}")
     with atomic_text_file(Path(path)) as out:
         out.write("\n".join(lines) + "\n")
-
-
-def _numbers(values: np.ndarray) -> str:
-    """Space-separated shortest exact float text."""
-    return " ".join(map(repr, values.tolist()))
 
 
 class _EntryParser:
@@ -345,6 +343,10 @@ class _EntryParser:
         return G2oFormatError(message, self.path, line)
 
     def parse(self, line: str, number: int) -> None:
+        line = line.removesuffix("\r")  # CRLF files
+        problem = check_line_characters(line)
+        if problem:
+            raise self.error(problem, number)
         fields = line.split()
         if not fields:
             return
@@ -416,10 +418,7 @@ class _EntryParser:
         self.lines.append(number)
 
     def integer(self, fields: list[str], position: int, what: str, number: int) -> int:
-        try:
-            value = int(fields[position])
-        except ValueError:
-            value = -1
+        value = int(fields[position]) if is_integer(fields[position]) else -1
         if value < 0 or value > np.iinfo(np.int64).max:
             raise self.error(
                 f"{fields[0]} field {position} ({what}) is {fields[position]!r}, expected a non-negative integer",
@@ -428,16 +427,10 @@ class _EntryParser:
         return value
 
     def floats(self, fields: list[str], start: int, number: int) -> list[float]:
-        try:
-            values = [float(token) for token in fields[start:]]
-        except ValueError:
-            values = []
-            for position, token in enumerate(fields[start:], start=start):
-                try:
-                    values.append(float(token))
-                except ValueError:
-                    message = f"{fields[0]} field {position} is {token!r}, expected a number"
-                    raise self.error(message, number) from None
+        for position, token in enumerate(fields[start:], start=start):
+            if not is_float(token):
+                raise self.error(f"{fields[0]} field {position} is {token!r}, expected a number", number)
+        values = [float(token) for token in fields[start:]]
         for position, value in enumerate(values, start=start):
             if not np.isfinite(value):
                 message = f"{fields[0]} field {position} is {fields[position]}, expected a finite number"
@@ -446,42 +439,47 @@ class _EntryParser:
 
 
 def _check_covariances(covariances: np.ndarray, lines: np.ndarray, path: Path) -> None:
-    """Reject covariances that are not symmetric positive definite, naming the first bad line."""
-    bad = _not_positive_definite(covariances)
+    """Reject covariances that are not symmetric positive definite, or whose inverse is not."""
+    bad, problem = _bad_covariances(covariances)
     if len(bad):
         raise G2oFormatError(
-            f"covariance is not symmetric positive definite; {len(bad)} of the file's {len(covariances)} "
-            "such matrices are affected",
+            f"{problem}; {len(bad)} of the file's {len(covariances)} such matrices are affected",
             path,
             int(lines[bad[0]]),
         )
 
 
-def _not_positive_definite(covariances: np.ndarray) -> np.ndarray:
-    """Indices of `(K, d, d)` matrices that are not symmetric positive definite."""
-    d = covariances.shape[-1]
+def _bad_covariances(covariances: np.ndarray) -> tuple[np.ndarray, str]:
+    """Indices of the `(K, d, d)` covariances egnc cannot use, and what is wrong with the first."""
     scale = np.abs(covariances).max(axis=(1, 2))
     asymmetric = np.abs(covariances - covariances.swapaxes(1, 2)).max(axis=(1, 2)) > 1e-9 * scale
-    eigenvalues = np.linalg.eigvalsh(covariances)
-    # Written as "not above" so that NaN also fails; relative to the largest eigenvalue.
-    singular = ~(eigenvalues[:, 0] > d * np.finfo(float).eps * np.abs(eigenvalues).max(axis=1))
-    return np.flatnonzero(asymmetric | singular)
+    bad = np.union1d(np.flatnonzero(asymmetric), not_positive_definite(covariances))
+    if len(bad):
+        return bad, "covariance is not symmetric positive definite"
+    bad = not_positive_definite(_information(covariances))
+    return bad, "covariance is too close to singular: its inverse (the information matrix) overflows a double"
+
+
+def _information(covariances: np.ndarray) -> np.ndarray:
+    """`(K, d, d)` symmetric inverses of symmetric positive-definite covariances (inf where they overflow)."""
+    with np.errstate(all="ignore"):
+        information = np.linalg.inv(covariances)
+    return 0.5 * (information + information.swapaxes(1, 2))
 
 
 def _build_graph(log: IrlLog) -> PoseGraph:
     """The `PoseGraph` of a log: ids, egnc measurements/information, odometry-composed guess."""
-    bad = _not_positive_definite(log.covariances)
+    bad, problem = _bad_covariances(log.covariances)
     if len(bad):
         where = f"line {log.entry_lines[bad[0]]}" if log.entry_lines[bad[0]] else f"edge {bad[0]}"
-        raise GraphError(f"covariance of {where} is not symmetric positive definite")
+        raise GraphError(f"{where}: {problem}")
     ids = log.edge_ids.ravel()
     if log.prior is not None:
         ids = np.append(ids, log.prior.vertex_id)
     vertex_ids = np.unique(ids)
     rows = np.searchsorted(vertex_ids, log.edge_ids)
     measurements = _from_irl_poses(log.dim, log.measurements)
-    information = np.linalg.inv(log.covariances)
-    information = 0.5 * (information + information.swapaxes(1, 2))
+    information = _information(log.covariances)
     if log.dim == 3:
         information = information[:, _GTSAM_TO_EGNC_3D][:, :, _GTSAM_TO_EGNC_3D]
 

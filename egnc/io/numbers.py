@@ -1,0 +1,69 @@
+"""The number grammar of the g2o and IRL readers, as one regular expression each for floats and ids.
+
+Python's `float()` and `int()` accept more than a pose-graph file should hold: `1_0`, a leading
+`+`, non-ASCII digits, surrounding Unicode whitespace. The readers accept exactly:
+
+- a float: an optional `-`, ASCII digits with an optional decimal point (`1`, `1.`, `.5`,
+  `1.5`), an optional exponent with an optional sign (`1e5`, `1E-05`, `1e+05`, as C++ streams
+  write it), or `nan` / `inf` / `infinity` in any case with an optional `-` (C++ streams write
+  these; the readers then reject them as not finite, with their own message);
+- an integer (vertex id): an optional `-` and ASCII digits.
+
+A leading `+` is refused: no g2o or IRL writer emits one, so it marks a hand-edited or corrupted
+field. Lines are split on ASCII spaces and tabs only (`check_line_characters`).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+FLOAT = r"-?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?|(?i:nan|inf|infinity))"
+"""A float token, as a regular expression (no anchors)."""
+
+INTEGER = r"-?[0-9]+"
+"""A vertex-id token, as a regular expression (no anchors)."""
+
+_FLOAT_RE = re.compile(FLOAT)
+_INTEGER_RE = re.compile(INTEGER)
+_FORBIDDEN_CHARACTER = re.compile(r"[^\t\x20-\x7e]")
+"""Anything but printable ASCII and tab: other whitespace (`\\x1c`, `\\u2028`, ...) and controls."""
+
+
+def is_float(token: str) -> bool:
+    """Whether the token is a float by the grammar above."""
+    return _FLOAT_RE.fullmatch(token) is not None
+
+
+def is_integer(token: str) -> bool:
+    """Whether the token is an integer by the grammar above (range not checked)."""
+    return _INTEGER_RE.fullmatch(token) is not None
+
+
+def parse_floats(tokens: list[str]) -> np.ndarray | None:
+    """The tokens as a `(len(tokens),)` float64 array, or None when any is not a float by the grammar.
+
+    Each distinct token is matched once (files repeat many, e.g. `0`), then NumPy converts them
+    all: about 0.1 s per million tokens.
+    """
+    if not all(map(_FLOAT_RE.fullmatch, set(tokens))):
+        return None
+    return np.array(tokens, dtype=np.float64)
+
+
+def check_line_characters(line: str) -> str | None:
+    """Why the data part of a line cannot be split into fields, or None when it can.
+
+    Fields are separated by ASCII spaces and tabs only; other whitespace and control characters
+    (which Python's `str.split` would also split on) are refused outside comments.
+    """
+    match = _FORBIDDEN_CHARACTER.search(line)
+    if match is None:
+        return None
+    return f"character U+{ord(match.group()):04X} outside a comment: fields must be ASCII, separated by spaces or tabs"
+
+
+def format_floats(values: np.ndarray) -> str:
+    """Space-separated shortest exact text of the floats (`repr`): reading it back gives the same bits."""
+    return " ".join(map(repr, np.asarray(values, dtype=np.float64).tolist()))
