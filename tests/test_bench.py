@@ -205,8 +205,10 @@ def test_noisy_manhattan_irl(dataset_path):
 
 def test_summary_means_over_seeds_time_ratio_and_failures():
     def run(method: str, seed: int, time_s: float, recall: float = 1.0, status: str = "ok") -> RunRecord:
+        # 10 loops of which 4 false; precision 1: only false loops are rejected
         return RunRecord("d", 30.0, seed, method, status, precision=1.0, recall=recall,
-                         success=recall == 1.0, ate=0.5, rpe_percent=2.0, time_s=time_s)  # fmt: skip
+                         success=recall == 1.0, ate=0.5, rpe_percent=2.0, time_s=time_s,
+                         loops=10, outliers=4, rejected=round(4 * recall))  # fmt: skip
 
     records = [
         run("risam", 1, 2.0), run("risam", 2, 4.0),
@@ -217,7 +219,9 @@ def test_summary_means_over_seeds_time_ratio_and_failures():
     assert (egnc.runs, egnc.ok, egnc.successes, egnc.failures) == (3, 2, 1, "1 timeout")
     assert egnc.recall == 0.75 and egnc.time_s == 1.5 and egnc.time_ratio == 0.5
     table = format_markdown([risam, egnc], "risam")
-    assert "| d | 30 | egnc | 1.0000 | 0.7500 | 1/3 | 0.5 | 2.00 | 1.500 | 0.50 | 1 timeout |" in table
+    # riSAM's convention: seed 2 keeps 2 false loops beside the 6 true ones, P = 0.75; mean 0.875
+    assert egnc.kept_precision == 0.875 and egnc.kept_recall == 1.0
+    assert "| d | 30 | egnc | 1.0000 | 0.7500 | 1/3 | 0.8750 | 1.0000 | 0.5 | 2.00 | 1.500 | 0.50 | 1 timeout |" in table
     (alone,) = summarize(records[2:], "risam")
     assert math.isnan(alone.time_ratio) and "| - |" in format_markdown([alone])
 
