@@ -12,7 +12,7 @@ if sys.version_info < (3, 10):  # noqa: UP036 - pip checks requires-python, a so
 from importlib.metadata import PackageNotFoundError, version
 
 from egnc.api import Result, StageReport, marginal_covariances, solve
-from egnc.errors import EgncError, G2oFormatError, GraphError, SolverError
+from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError, NumericalError, SolverError
 from egnc.gnc import GncOptions
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o, write_g2o
@@ -26,9 +26,11 @@ except PackageNotFoundError:  # imported from a source tree that was never insta
 
 __all__ = [
     "EgncError",
+    "EgncWarning",
     "G2oFormatError",
     "GncOptions",
     "GraphError",
+    "NumericalError",
     "PoseGraph",
     "Result",
     "SolverError",

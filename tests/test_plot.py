@@ -6,6 +6,7 @@ import importlib
 import importlib.util
 import math
 import os
+import struct
 import subprocess
 import sys
 import textwrap
@@ -327,3 +328,17 @@ def test_cli_plot_without_matplotlib_fails_in_one_line_before_solving(tmp_path):
     assert run.stderr.count("\n") == 1 and run.stderr.startswith("egnc-solve: error: ")
     assert INSTALL_HINT in run.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_plot_size_and_dpi_set_the_image_size(tmp_path):
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "t.png"
+    run = subprocess.run(
+        [sys.executable, "-m", "egnc.cli.solve", str(DATASETS / "grid2d.g2o"), "--plot", str(out),
+         "--plot-size", "4", "3", "--dpi", "50", "-q"],  # fmt: skip
+        capture_output=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr
+    width, height = struct.unpack(">II", out.read_bytes()[16:24])  # the PNG header's IHDR size
+    assert (width, height) == (200, 150)

@@ -31,6 +31,8 @@ class OutputPlan:
         graph: `-o`, the optimized graph (g2o).
         report: `--report`, the JSON report.
         plot: `--plot`, the trajectory figure.
+        plot_size: `--plot-size`, the figure's `(width, height)` in inches; None for the default.
+        dpi: `--dpi`, the figure's resolution in dots per inch.
         trajectory: `--trajectory`, the poses in TUM or KITTI format.
         trajectory_format: `"tum"`, `"kitti"`, or None to take it from the suffix.
         edges: `--edges`, the per-edge CSV.
@@ -40,6 +42,8 @@ class OutputPlan:
     graph: Path | None = None
     report: Path | None = None
     plot: Path | None = None
+    plot_size: tuple[float, float] | None = None
+    dpi: float = 100.0
     trajectory: Path | None = None
     trajectory_format: TrajectoryFormat | None = None
     edges: Path | None = None
@@ -92,7 +96,7 @@ class OutputPlan:
                 with atomic_text_file(self.report) as out:
                     out.write(json.dumps(report, indent=2, allow_nan=False) + "\n")
             if self.plot is not None:
-                save_figure(plot_trajectory(result, initial=initial), self.plot)
+                save_figure(plot_trajectory(result, initial=initial, size=self.plot_size), self.plot, dpi=self.dpi)
             if self.trajectory is not None:
                 write_trajectory(result.graph, self.trajectory, self.trajectory_format)
             if self.edges is not None:
