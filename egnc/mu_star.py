@@ -44,7 +44,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize.elementwise import find_root
 from scipy.special import expit
 
 from egnc.errors import EgncError
@@ -103,6 +102,8 @@ def mu_star(r: ArrayLike, c: float = 3.0) -> np.ndarray:
     out[active[at_half]] = 0.5
     active, log_r2 = active[~at_half], log_r2[~at_half]
     if active.size:
+        from scipy.optimize.elementwise import find_root  # 0.1 s of imports, paid only when used
+
         result = find_root(
             convexity_margin,
             (0.5, 1.0),

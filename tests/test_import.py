@@ -72,3 +72,15 @@ def test_asking_for_cholmod_without_scikit_sparse_is_one_clear_error():
     [line] = run.stderr.splitlines()
     assert line.startswith("egnc-solve: error: linear solver 'cholmod' needs scikit-sparse")
     assert "pip install 'egnc[cholmod]'" in line
+
+
+@pytest.mark.parametrize("module", ["egnc", "egnc.cli.solve"])
+def test_start_up_imports_nothing_a_small_solve_does_not_use(module):
+    # scipy.stats alone cost 0.5 s of every egnc-solve; scipy.optimize is only needed for mu*.
+    script = f"import sys, {module}; print(sorted(m for m in sys.modules if m.split('.')[0:2] in HEAVY))"
+    heavy = "[['scipy', 'stats'], ['scipy', 'optimize'], ['matplotlib'], ['sksparse']]"
+    run = subprocess.run(
+        [sys.executable, "-c", f"HEAVY = {heavy}\n{script}"], capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "[]"

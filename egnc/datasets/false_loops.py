@@ -33,11 +33,11 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-import scipy.stats
 
 from egnc.errors import EgncError
 from egnc.factors import group_of, to_matrices
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.kernels import chi2_quantile
 
 Variant = Literal["random", "group", "mixed", "close"]
 VARIANTS: tuple[str, ...] = ("random", "group", "mixed", "close")
@@ -158,7 +158,7 @@ class _Sampler:
         self.forward = forward
         self.close_radius = close_radius
         self.information_diagonal = np.diag(_false_loop_information(dim))
-        self.threshold = float(scipy.stats.chi2.ppf(ACCEPT_QUANTILE, TANGENT_SIZE[dim]))
+        self.threshold = chi2_quantile(ACCEPT_QUANTILE, TANGENT_SIZE[dim])
 
     def draw(self, count: int, size: int) -> np.ndarray:
         """Return `(count, 2)` int64 false-loop edges made of groups of `size` consecutive pairs."""

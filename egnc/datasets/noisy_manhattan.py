@@ -64,7 +64,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.stats
 
 from egnc.api import solve
 from egnc.datasets.grid_world import expand_sigmas, rounded
@@ -73,6 +72,7 @@ from egnc.factors import from_matrices, group_of, to_matrices
 from egnc.graph import POSE_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.irl import IrlLog
+from egnc.kernels import chi2_quantile
 
 __all__ = [
     "ACCEPT_QUANTILE",
@@ -208,7 +208,7 @@ def make_noisy_manhattan(
     R_i_j = group.between(T_reference[graph.edges[:, 0]], T_reference[graph.edges[:, 1]])
 
     pending = np.flatnonzero(is_outlier)
-    threshold = float(scipy.stats.chi2.ppf(ACCEPT_QUANTILE, d)) if outlier_min_r2 is None else outlier_min_r2
+    threshold = chi2_quantile(ACCEPT_QUANTILE, d) if outlier_min_r2 is None else outlier_min_r2
     for _ in range(_MAX_ROUNDS):
         if len(pending) == 0:
             break
