@@ -14,7 +14,7 @@ from egnc.gnc import StageReport
 from egnc.graph import PoseGraph
 from egnc.metrics import ate
 
-MOVED_FRACTION = 0.01
+MOVED_FRACTION = 0.05
 """A result "far" from a consistent initial guess: ATE above this fraction of the trajectory's extent."""
 
 
@@ -41,7 +41,7 @@ def solve_warnings(
     """
     warnings = [
         f"stage {k} stopped at its iteration limit ({stage.iterations} iterations): the result may not"
-        " have converged (raise --max-iters / SolverOptions.max_iterations)"
+        " have converged (raise --max-iters; from a far-off guess, try --init chordal)"
         for k, stage in enumerate(stages, start=1)
         if stage.status == 0
     ]
