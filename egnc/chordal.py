@@ -15,8 +15,8 @@ rotation in the Frobenius norm: SVD with a determinant fix).
 Rotation weight. For small errors `||R_j - R_i Z_ij||_F^2 ~ ||[e_omega]x||_F^2`, proportional to
 `|e_omega|^2`, so the relaxation can only carry an isotropic rotation precision per edge. egnc
 takes the mean of the diagonal of the information's rotation block (exact for isotropic noise,
-which the benchmark files use; GTSAM's InitializePose3 takes the first rotation component's
-square-root information instead). Only ratios between edges matter.
+which most benchmark files use; GTSAM's InitializePose3 also reduces each edge to one isotropic
+rotation precision). Only ratios between edges matter.
 
 Translations. With the rotations fixed, `t_j - t_i = R_i t_ij` is linear in the translations.
 Its error, expressed in pose j's frame as the residual's `v` part is to first order, is
