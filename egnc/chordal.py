@@ -64,11 +64,16 @@ def chordal_initialization(
 
     Raises:
         EgncError: `weights` has the wrong shape or values outside [0, 1].
-        SolverError: some pose is not connected to the gauge by edges of nonzero weight.
+        SolverError: the normal equations are singular, e.g. some pose is not connected to the
+            gauge by edges of nonzero weight (CHOLMOD detects this; SuperLU may not).
     """
     edge_weights = _validated_weights(weights, graph.num_edges)
     dim = graph.dim
-    anchored = graph.fixed.copy() if graph.fixed.any() else np.eye(1, graph.num_poses, dtype=bool)[0]
+    anchored = graph.fixed.copy()
+    if not anchored.any():
+        anchored[0] = True
+    if anchored.all():
+        return graph.poses.copy()
     backend = resolve_name(linear_solver)
     T_anchor = to_matrices(dim, graph.poses[anchored])
     Z = to_matrices(dim, graph.measurements)
@@ -179,8 +184,7 @@ def nearest_rotation(M: np.ndarray) -> np.ndarray:
     +1 even when `M` has a negative determinant.
     """
     U, _, Vt = np.linalg.svd(M)
-    sign = np.sign(np.linalg.det(U @ Vt))
-    U[..., :, -1] *= np.where(sign == 0.0, 1.0, sign)[..., None]
+    U[..., :, -1] *= np.sign(np.linalg.det(U @ Vt))[..., None]  # the smallest singular value's column
     return U @ Vt
 
 

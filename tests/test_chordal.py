@@ -64,6 +64,12 @@ def test_gauge_poses_are_returned_exactly_and_the_rest_ignores_the_guess(dim):
     np.testing.assert_allclose(chordal_initialization(graph.with_poses(other_guess)), poses, atol=1e-12)
 
 
+def test_all_poses_fixed_returns_them_unchanged():
+    graph = grid_world(3, 5, seed=0).graph
+    graph = PoseGraph(3, graph.vertex_ids, graph.poses, graph.edges, graph.measurements, graph.information, np.ones(5))
+    np.testing.assert_array_equal(chordal_initialization(graph), graph.poses)
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_nearest_rotation_is_a_proper_rotation(d):
     M = np.random.default_rng(0).normal(size=(500, d, d))
