@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+from egnc.chordal import chordal_initialization
 from egnc.decision import decide_outliers
 from egnc.diagnostics import solve_warnings
-from egnc.errors import GraphError
+from egnc.errors import EgncError, GraphError
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
     GncOptions,
@@ -21,13 +22,17 @@ from egnc.gnc import (
     run_gnc,
 )
 from egnc.graph import PoseGraph
+from egnc.initialize import initialize_poses
 from egnc.io import read_g2o
 from egnc.least_squares import STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
 from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 
-__all__ = ["METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
+__all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
+
+INITIALIZATIONS = ("file", "odometry", "chordal")
+"""Initial guesses `egnc.solve(init=...)` and `egnc-solve --init` accept (see `initial_guess`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +65,7 @@ class Result:
         robust_residual_norms: `(E,)` `r` at the end of the last GNC stage, before the outlier
             decision (the robust optimum; equal to `residual_norms` for single-stage methods).
             With `residual_norms` it explains a rejection: a loop far off at both is false.
+        init: the initial guess used (`INITIALIZATIONS`).
         warnings: one sentence per thing the user should check before trusting the result
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
     """
@@ -82,6 +88,7 @@ class Result:
     timings: dict[str, float]
     robust_residual_norms: np.ndarray
     warnings: tuple[str, ...] = ()
+    init: str = "file"
 
     def __repr__(self) -> str:
         loops = int(np.count_nonzero(~self.known_inliers))
@@ -103,11 +110,40 @@ class Result:
         return np.flatnonzero(~self.inliers)
 
 
+def initial_guess(graph: PoseGraph, init: str, known_inliers: np.ndarray, linear_solver: str) -> np.ndarray:
+    """`(N, P)` starting poses of a solve.
+
+    Args:
+        graph: the pose graph.
+        init: `"file"`: the graph's poses (from the file; missing ones composed along a spanning
+            tree when it was read). `"odometry"`: the known-inlier edges composed from the gauge
+            pose(s), ignoring the file's other poses. `"chordal"`: `egnc.chordal`, rotations by the
+            chordal relaxation then translations, over every edge: independent of odometry drift,
+            but it trusts every loop closure, so false loops distort it (BENCHMARKS.md).
+        known_inliers: `(E,)` bool, the edges `"odometry"` composes.
+        linear_solver: resolved backend, for `"chordal"`.
+    """
+    if init == "file":
+        return graph.poses
+    if init == "chordal":
+        return chordal_initialization(graph, linear_solver=linear_solver)
+    if init == "odometry":
+        gauge = graph.fixed if graph.fixed.any() else np.arange(graph.num_poses) == 0
+        try:
+            return initialize_poses(
+                graph.dim, graph.edges[known_inliers], graph.measurements[known_inliers], poses=graph.poses, known=gauge
+            )
+        except GraphError as error:
+            raise GraphError(f"init 'odometry': {error}; use init 'file' or 'chordal'") from None
+    raise EgncError(f"unknown init {init!r}: choose one of {', '.join(INITIALIZATIONS)}")
+
+
 def solve(
     graph: PoseGraph | str | Path,
     method: str = "egnc",
     *,
     known_inliers: str | np.ndarray = "odometry",
+    init: str = "file",
     linear_solver: str = "auto",
     options: SolverOptions | None = None,
     gnc_options: GncOptions | None = None,
@@ -122,6 +158,10 @@ def solve(
             `"huber"`, `"cauchy"`, `"gm"` or `"l2"` (plain least squares).
         known_inliers: edges that stay quadratic: `"odometry"` (consecutive ids, default),
             `"none"`, or an `(E,)` bool mask.
+        init: the initial guess, one of `INITIALIZATIONS` (`initial_guess`): `"file"` (default:
+            on every shared dataset, with or without false loops, it did at least as well as the
+            others; `"chordal"` reaches better least-squares minima from a drifted guess but is
+            distorted by false loops), `"odometry"` or `"chordal"`.
         linear_solver: `"auto"` (CHOLMOD when scikit-sparse is importable, else SciPy),
             `"cholmod"` or `"scipy"`.
         options: options of each stage's GN/LM solve (tolerances, iteration limit).
@@ -143,6 +183,7 @@ def solve(
     robust = ~known
     backend = resolve_name(linear_solver)
     factors = BetweenFactors.from_graph(graph)
+    graph = graph.with_poses(initial_guess(graph, init, known, backend))
     initial = to_matrices(graph.dim, graph.poses)
     initial_r = factors.whitened_norms(factors.residuals(initial))
     refine = method in GRADUATED_METHODS and gnc_options.refine
@@ -185,6 +226,7 @@ def solve(
         timings=outcome.timings,
         robust_residual_norms=robust_r,
         warnings=solve_warnings(graph, stages, robust, inliers, initial_r, r, initial_fits, result_poses),
+        init=init,
     )
 
 

@@ -51,7 +51,6 @@ def solve_warnings(
         warnings.append(
             f"{num_rejected} of {num_loops} loop closures were rejected (more than half): either most are false,"
             " or the information matrices are far too confident for this data, or the initial guess is poor"
-            " (compare with --method l2)"
         )
     initial_cost = 0.5 * float(np.sum(initial_r[inliers] ** 2))
     final_cost = 0.5 * float(np.sum(final_r[inliers] ** 2))

@@ -33,6 +33,7 @@ def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
     graph = result.graph
     report = {
         "method": result.method,
+        "init": result.init,
         "linear_solver": result.linear_solver,
         "time_s": result.time_s,
         "initial_cost": result.initial_cost,
@@ -47,6 +48,16 @@ def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
         "loop_closures": int(graph.is_loop_closure.sum()),
         "known_inliers": int(result.known_inliers.sum()),
         "rejected_edges": result.rejected_edges.tolist(),
+        "rejected": [
+            {
+                "edge": int(k),
+                "i": int(graph.vertex_ids[graph.edges[k, 0]]),
+                "j": int(graph.vertex_ids[graph.edges[k, 1]]),
+                "r_robust": float(result.robust_residual_norms[k]),
+                "r": float(result.residual_norms[k]),
+            }
+            for k in result.rejected_edges
+        ],
         "stages": [
             {
                 "mu_min": _finite_or_none(stage.mu_min),

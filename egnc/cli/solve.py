@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from egnc import __version__
-from egnc.api import METHODS, Result, StageReport, solve
+from egnc.api import INITIALIZATIONS, METHODS, Result, StageReport, solve
 from egnc.cli.outputs import OutputPlan
 from egnc.cli.report import report_dict, summary
 from egnc.cli.signals import INTERRUPT_EXIT_CODES, Terminated, sigterm_raises
@@ -84,6 +84,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--drop-outliers", action="store_true", help="write the output graph without the rejected loop closures"
+    )
+    parser.add_argument(
+        "--init",
+        choices=INITIALIZATIONS,
+        default="file",
+        help="initial guess: the file's poses (default), the odometry composed from the first pose, or the"
+        " chordal relaxation (better from a drifted guess, but distorted by false loop closures)",
     )
     parser.add_argument(
         "--linear-solver",
@@ -219,6 +226,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
             graph,
             args.method,
             known_inliers=known_inliers,
+            init=args.init,
             linear_solver=args.linear_solver,
             options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
             on_stage=None if args.quiet else _print_stage_progress(),
