@@ -52,8 +52,8 @@ class GncOptions:
         outlier_quantile: the chi-square quantile of the outlier report.
         max_stages: stop graduating after this many stages (reported in the status message).
             A stage whose loss would equal the previous one's is never run, and graduation also
-            stops after a stage that reached `SolverOptions.max_iterations` (the result then
-            carries a warning).
+            stops after two stages in a row that reached `SolverOptions.max_iterations` (the
+            result then carries a warning).
         refine: graduated methods only (egnc, risam, gnc-gm, gnc-tls): after classification,
             decide on least-squares maps of the accepted edges (`egnc.decision`): re-solve
             least squares on them (warm-started, with the caller's `SolverOptions`), reject the
@@ -246,9 +246,10 @@ def run_gnc(
             timings[phase] = timings.get(phase, 0.0) + seconds
         status, message = solution.status, solution.message
         last = stage
-        if solution.status == 0:
-            # Every stage starts from the same guess with a harder loss: one that could not converge
-            # in max_iterations predicts the next (a corrupted odometry edge: 100 stages of 100).
+        if solution.status == 0 and len(reports) > 1 and reports[-2].status == 0:
+            # Two stages in a row that could not converge from the same guess predict the rest (a
+            # corrupted odometry edge ran 100 stages of 100 iterations). One alone does not: a slow
+            # least-squares stage 0 is often followed by robust stages that converge quickly.
             break
         stage = schedule.next_stage(r, solution.converged)
         if stage is not None and gnc_options.prune_weight > 0:

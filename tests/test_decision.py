@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 
 import numpy as np
@@ -162,3 +163,14 @@ def test_marginal_covariances_match_gtsam_marginals(dataset_path):
     assert np.all(marginal_covariances(result, [0]) == 0)  # the gauge pose is fixed
     with pytest.raises(egnc.GraphError, match="no vertex with id"):
         marginal_covariances(result, [99])
+
+
+def test_a_corrupted_odometry_edge_is_reported_not_hidden():
+    world = grid_world(2, 300, seed=9, noise_scale=0.3)
+    graph = world.graph
+    measurements = graph.measurements.copy()
+    k = np.flatnonzero(graph.is_odometry)[40]
+    measurements[k, 0] += 1000.0  # a wheel-odometry glitch of a kilometre
+    result = solve(dataclasses.replace(graph, measurements=measurements))
+    assert any("known-inlier edges (odometry) disagree" in warning for warning in result.warnings)
+    assert len(result.stages) <= 3 + MAX_ROUNDS
