@@ -10,10 +10,16 @@ So the decision is made on least-squares maps instead, in rounds:
    imply).
 2. An accepted loop closure whose squared whitened residual `r^2` exceeds `chi2.ppf(q, d)` is
    rejected: it disagrees with the map even though it helped shape it.
-3. A rejected loop closure is re-admitted when its innovation statistic
-   `e^T (Omega^-1 + A H^-1 A^T)^-1 e <= chi2.ppf(q, d)` (`egnc.marginals`): the map built
-   without it predicts its measurement within the combined uncertainty of both. Its residual
-   alone (`r^2`) would ignore how uncertain the relative pose of two far-apart poses is.
+3. Rejected loop closures are re-admitted by their innovation statistic
+   `e^T (Omega^-1 + A H^-1 A^T)^-1 e` (`egnc.marginals`): how well the map built without them
+   predicts their measurements, within the combined uncertainty of both (the residual alone,
+   `r^2`, ignores how uncertain the relative pose of two far-apart poses is). If the map agrees
+   with *all* rejected loops, conditioned one on another, at `chi2.ppf(q_readmit, d)`, all
+   come back: nothing in the graph contradicts anything else (MIT, smallGrid3D). Otherwise only
+   loops whose relative pose the map determines at least as well as they measure it are
+   re-admitted, each given those before it: where the map is weaker, agreement within its
+   uncertainty says little, and the noisy Manhattan graphs absorbed gross outliers that way
+   (recall 0.89, ATE 8.8 m on manhattan_noisy.irl before this gate).
 4. Repeat until the classification holds (or `MAX_ROUNDS`, or a round that reaches the
    iteration limit).
 
@@ -21,8 +27,9 @@ Both tests have false-alarm rate `1 - q` per honest loop under the linear-Gaussi
 (the included loop's `r^2` is stochastically smaller than the leave-one-out statistic).
 
 Rejected loops are tested in order of increasing `r^2`, in batches of `READMIT_BATCH`; testing
-stops at the first batch in which none passes, so a graph with thousands of gross false loops
-pays for one or two batches of marginal covariances, not thousands.
+stops at the first batch in which none passes (the all-agree test starts from the largest
+residuals and stops at the first batch that fails), so a graph with thousands of gross false
+loops pays for two or three batches of marginal covariances, not thousands.
 
 References:
     M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data
@@ -54,7 +61,14 @@ READMIT_BATCH = 64
 def readmitted(
     problem: Problem, poses: np.ndarray, graph: PoseGraph, rejected: np.ndarray, r: np.ndarray, quantile: float
 ) -> np.ndarray:
-    """`(E,)` bool: the `rejected` edges that the map of `problem` agrees with, as a group.
+    """`(E,)` bool: the `rejected` edges that the map of `problem` agrees with.
+
+    Two cases (module docstring). If the map agrees with *every* rejected loop, taken together,
+    all come back: nothing in the graph contradicts anything else (a clean graph whose loops the
+    robust kernel let go). Otherwise only loops whose relative pose the map already determines at
+    least as precisely as the loop measures it are re-admitted, one at a time, each given those
+    before it: where the map is weaker than the loop, agreement within the map's uncertainty says
+    little (a weakly constrained graph absorbs gross outliers), and the robust verdict stands.
 
     Args:
         problem: least squares of the accepted edges, solved at `poses` `(N, n, n)`.
@@ -68,17 +82,48 @@ def readmitted(
     candidates = np.flatnonzero(rejected)
     candidates = candidates[np.argsort(r[candidates], kind="stable")]
     passed = np.zeros(graph.num_edges, dtype=bool)
-    for start in range(0, len(candidates), READMIT_BATCH):
-        batch = np.sort(candidates[start : start + READMIT_BATCH])  # the edge order subgraph_edges keeps
-        loops = BetweenFactors.from_graph(graph.subgraph_edges(_mask(graph.num_edges, batch)))
-        try:
-            ok = sequentially_consistent(*innovations(problem, poses, loops), threshold)
-        except NotPositiveDefiniteError:  # no covariance at a degenerate solution: nothing to test against
-            break
-        if not ok.any():
-            break
-        passed[batch[ok]] = True
+    try:
+        # Largest residuals first: one batch refutes "all fit" in a graph with gross outliers.
+        for stop in range(len(candidates), 0, -READMIT_BATCH):
+            batch = candidates[max(0, stop - READMIT_BATCH) : stop]
+            e, S, _ = _batch_innovations(problem, poses, graph, batch)
+            if not sequentially_consistent(e, S, threshold).all():
+                break
+        else:
+            return rejected.copy()
+        for start in range(0, len(candidates), READMIT_BATCH):
+            batch = candidates[start : start + READMIT_BATCH]
+            e, S, well_determined = _batch_innovations(problem, poses, graph, batch)
+            rows = (np.flatnonzero(well_determined)[:, None] * e.shape[1] + np.arange(e.shape[1])).ravel()
+            ok = np.zeros(len(batch), dtype=bool)
+            ok[well_determined] = sequentially_consistent(e[well_determined], S[np.ix_(rows, rows)], threshold)
+            if not ok.any():
+                break
+            passed[np.sort(batch)[ok]] = True
+    except NotPositiveDefiniteError:  # no covariance at a degenerate solution: nothing to test against
+        pass
     return passed
+
+
+def _batch_innovations(
+    problem: Problem, poses: np.ndarray, graph: PoseGraph, batch: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Innovations `(K, d)`, covariance `(K d, K d)` and `(K,)` "well determined" flags of edges `batch`, in edge order.
+
+    A loop's relative pose is well determined when the map's covariance of it is no larger than
+    the loop's own in total variance, `trace(Sigma_rel) <= trace(Omega^-1)` (metres^2 and
+    radians^2 added, as in the tangent). The scale-free `lambda_max(Omega^(1/2) Sigma_rel
+    Omega^(1/2)) <= 1` was measured too strict: CSAIL's true corridor loop measures its rotation
+    far better than the map knows it (lambda_max 329) while the map fixes the rest (trace ratio
+    0.16); the gross outliers the noisy Manhattan graphs absorb have trace ratios 1.2 to 7.
+    """
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(_mask(graph.num_edges, batch)))
+    e, S = innovations(problem, poses, loops)
+    d = e.shape[1]
+    block = np.arange(len(e))[:, None] * d + np.arange(d)
+    own = np.linalg.inv(loops.information)
+    relative = S[block[:, :, None], block[:, None, :]] - own
+    return e, S, np.trace(relative, axis1=1, axis2=2) <= np.trace(own, axis1=1, axis2=2)
 
 
 def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> np.ndarray:
