@@ -1,0 +1,41 @@
+"""The GTSAM process that `egnc-solve FILE --method l2 -o OUT` is timed against.
+
+`python benchmarks/gtsam_solve.py IN.g2o OUT.g2o`: `readG2o`, a prior on the first pose (sigma
+1e-3, as every GTSAM baseline here), Levenberg-Marquardt with tolerances 1e-10 (egnc's
+`SolverOptions` defaults; GTSAM's own 1e-5 stops early on the 3D files), `writeG2o`. The same
+job as egnc-solve's, start-up and imports included, for whole-process timing:
+
+    <timer> --vs 'python benchmarks/gtsam_solve.py F /tmp/g.g2o' -- egnc-solve F --method l2 -o /tmp/e.g2o -q
+"""
+
+from __future__ import annotations
+
+import sys
+
+import gtsam
+import numpy as np
+
+
+def main(argv: list[str]) -> int:
+    """Solve `argv[0]` by least squares and write the result to `argv[1]`."""
+    source, target = argv
+    with open(source) as text:
+        is_3d = any(line.startswith("VERTEX_SE3") or line.startswith("EDGE_SE3") for line in text)
+    graph, initial = gtsam.readG2o(source, is_3d)
+    first = initial.keys()[0]
+    if is_3d:
+        prior = gtsam.PriorFactorPose3(first, initial.atPose3(first), gtsam.noiseModel.Isotropic.Sigma(6, 1e-3))
+    else:
+        prior = gtsam.PriorFactorPose2(first, initial.atPose2(first), gtsam.noiseModel.Isotropic.Sigma(3, 1e-3))
+    graph.add(prior)
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-10)
+    params.setAbsoluteErrorTol(1e-10)
+    params.setMaxIterations(100)
+    result = gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize()
+    gtsam.writeG2o(graph, result, target)
+    return 0 if np.isfinite(graph.error(result)) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
