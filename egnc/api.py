@@ -191,13 +191,15 @@ def solve(
     if refine:  # the refinement converges tightly; the stages need not
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, gnc_options.stage_rel_cost_tol))
     schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
-    outcome = run_gnc(graph, initial, schedule, robust, stage_options, gnc_options, backend, on_stage, on_iteration)
+    outcome = run_gnc(
+        graph, initial, schedule, robust, stage_options, gnc_options, backend, factors, on_stage, on_iteration
+    )
     poses, stages = outcome.poses, outcome.stages
     status, message = outcome.status, outcome.message
     robust_r = factors.whitened_norms(factors.residuals(poses))
     if refine:
         poses, inliers, refinements = decide_outliers(
-            graph, poses, robust, options, gnc_options, backend, on_stage, on_iteration
+            graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration
         )
         stages += refinements
         if refinements:

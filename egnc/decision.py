@@ -59,7 +59,7 @@ READMIT_BATCH = 64
 
 
 def readmitted(
-    problem: Problem, poses: np.ndarray, graph: PoseGraph, rejected: np.ndarray, r: np.ndarray, quantile: float
+    problem: Problem, poses: np.ndarray, factors: BetweenFactors, rejected: np.ndarray, r: np.ndarray, quantile: float
 ) -> np.ndarray:
     """`(E,)` bool: the `rejected` edges that the map of `problem` agrees with.
 
@@ -73,27 +73,27 @@ def readmitted(
     Args:
         problem: least squares of the accepted edges, solved at `poses` `(N, n, n)`.
         poses: the solution.
-        graph: the whole graph.
+        factors: the whole graph's factors.
         rejected: `(E,)` bool, edges left out of `problem`.
         r: `(E,)` whitened residual norms at `poses`, to order the candidates.
         quantile: chi-square quantile of the test.
     """
-    threshold = chi2_quantile(quantile, graph.tangent_dim)
+    threshold = chi2_quantile(quantile, factors.information.shape[-1])
     candidates = np.flatnonzero(rejected)
     candidates = candidates[np.argsort(r[candidates], kind="stable")]
-    passed = np.zeros(graph.num_edges, dtype=bool)
+    passed = np.zeros(len(rejected), dtype=bool)
     try:
         # Largest residuals first: one batch refutes "all fit" in a graph with gross outliers.
         for stop in range(len(candidates), 0, -READMIT_BATCH):
             batch = candidates[max(0, stop - READMIT_BATCH) : stop]
-            e, S, _ = _batch_innovations(problem, poses, graph, batch)
+            e, S, _ = _batch_innovations(problem, poses, factors, batch)
             if not sequentially_consistent(e, S, threshold).all():
                 break
         else:
             return rejected.copy()
         for start in range(0, len(candidates), READMIT_BATCH):
             batch = candidates[start : start + READMIT_BATCH]
-            e, S, well_determined = _batch_innovations(problem, poses, graph, batch)
+            e, S, well_determined = _batch_innovations(problem, poses, factors, batch)
             rows = (np.flatnonzero(well_determined)[:, None] * e.shape[1] + np.arange(e.shape[1])).ravel()
             ok = np.zeros(len(batch), dtype=bool)
             ok[well_determined] = sequentially_consistent(e[well_determined], S[np.ix_(rows, rows)], threshold)
@@ -106,7 +106,7 @@ def readmitted(
 
 
 def _batch_innovations(
-    problem: Problem, poses: np.ndarray, graph: PoseGraph, batch: np.ndarray
+    problem: Problem, poses: np.ndarray, factors: BetweenFactors, batch: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Innovations `(K, d)`, covariance `(K d, K d)` and `(K,)` "well determined" flags of edges `batch`, in edge order.
 
@@ -117,7 +117,7 @@ def _batch_innovations(
     far better than the map knows it (lambda_max 329) while the map fixes the rest (trace ratio
     0.16); the gross outliers the noisy Manhattan graphs absorb have trace ratios 1.2 to 7.
     """
-    loops = BetweenFactors.from_graph(graph.subgraph_edges(_mask(graph.num_edges, batch)))
+    loops = factors.subset(np.sort(batch))
     e, S = innovations(problem, poses, loops)
     d = e.shape[1]
     block = np.arange(len(e))[:, None] * d + np.arange(d)
@@ -157,12 +157,6 @@ def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> n
     return admitted
 
 
-def _mask(size: int, indices: np.ndarray) -> np.ndarray:
-    mask = np.zeros(size, dtype=bool)
-    mask[indices] = True
-    return mask
-
-
 def decide_outliers(
     graph: PoseGraph,
     poses: np.ndarray,
@@ -170,6 +164,7 @@ def decide_outliers(
     solver_options: SolverOptions,
     gnc_options: GncOptions,
     linear_solver: str,
+    factors: BetweenFactors,
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
 ) -> tuple[np.ndarray, np.ndarray, tuple[StageReport, ...]]:
@@ -182,13 +177,13 @@ def decide_outliers(
         solver_options: options of each least-squares refinement.
         gnc_options: `outlier_quantile` and `readmit`.
         linear_solver: resolved backend name.
+        factors: the graph's factors, built once per solve.
         on_stage, on_iteration: progress callbacks; each round is reported as a stage.
 
     Returns:
         `(poses, inliers, reports)`: refined `(N, n, n)` poses, `(E,)` inlier flags consistent
         with them (unless `MAX_ROUNDS` was hit), and one `StageReport` per round.
     """
-    factors = BetweenFactors.from_graph(graph)
     d = graph.tangent_dim
     inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
     reports: list[StageReport] = []
@@ -196,13 +191,14 @@ def decide_outliers(
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != 1:
             break
         started = time.perf_counter()
-        problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver)
+        problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver, factors.subset(inliers))
         refined = solve_least_squares(problem, poses, None, solver_options, on_iteration)
         poses = refined.poses
         r = factors.whitened_norms(factors.residuals(poses))
         decided = classify_inliers(r, robust, d, gnc_options)
         if gnc_options.readmit:
-            decided = (decided & inliers) | readmitted(problem, poses, graph, ~inliers, r, gnc_options.readmit_quantile)
+            back = readmitted(problem, poses, factors, ~inliers, r, gnc_options.readmit_quantile)
+            decided = (decided & inliers) | back
         reports.append(
             StageReport(
                 np.nan,

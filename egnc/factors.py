@@ -109,6 +109,10 @@ class BetweenFactors:
         Z = to_matrices(graph.dim, graph.measurements)
         return cls(graph.dim, graph.edges, group.inverse(Z), graph.information)
 
+    def subset(self, keep: np.ndarray) -> BetweenFactors:
+        """The factors of the edges `keep` selects (an `(E,)` bool mask or increasing indices), in edge order."""
+        return BetweenFactors(self.dim, self.edges[keep], self.Z_inv[keep], self.information[keep])
+
     def evaluate(self, T: np.ndarray) -> EdgeErrors:
         """Residuals `e = Log(Z^-1 X_i^-1 X_j)` at poses `T` `(N, n, n)`, keeping `X_j^-1 X_i` for `linearize`."""
         if self.dim == 2:

@@ -189,6 +189,7 @@ def run_gnc(
     solver_options: SolverOptions,
     gnc_options: GncOptions,
     linear_solver: str,
+    factors: BetweenFactors,
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
 ) -> GncOutcome:
@@ -206,12 +207,12 @@ def run_gnc(
         solver_options: options of each stage's GN/LM solve.
         gnc_options: stage limit and pruning weight.
         linear_solver: resolved backend name, `"cholmod"` or `"scipy"`.
+        factors: the graph's factors, built once per solve.
         on_stage: called with each `StageReport` as soon as its stage ends (progress display).
         on_iteration: called with `(iterations, cost)` after each accepted step of a stage.
     """
-    factors = BetweenFactors.from_graph(graph)
     active = np.ones(graph.num_edges, dtype=bool)
-    problem = Problem.from_graph(graph, linear_solver)
+    problem = Problem.from_graph(graph, linear_solver, factors)
     poses = initial_poses
     r = factors.whitened_norms(factors.residuals(poses))
     last = schedule.first_stage(r)
@@ -256,7 +257,7 @@ def run_gnc(
             keep = active & ~(robust & (stage.loss.weight(r) < gnc_options.prune_weight))
             if keep.sum() < active.sum() and connected_components(graph.num_poses, graph.edges[keep])[0] == 1:
                 active = keep
-                problem = Problem.from_graph(graph.subgraph_edges(active), linear_solver)
+                problem = Problem.from_graph(graph.subgraph_edges(active), linear_solver, factors.subset(active))
     return GncOutcome(
         poses=poses,
         weights=last.loss.weight(r),

@@ -159,8 +159,13 @@ class Problem:
     linear_solver: LinearSolver
 
     @classmethod
-    def from_graph(cls, graph: PoseGraph, linear_solver: str = "auto") -> Problem:
-        """Prepare `graph` for solving; the gauge is fixed on pose 0 unless some poses are fixed."""
+    def from_graph(
+        cls, graph: PoseGraph, linear_solver: str = "auto", factors: BetweenFactors | None = None
+    ) -> Problem:
+        """Prepare `graph` for solving; the gauge is fixed on pose 0 unless some poses are fixed.
+
+        `factors`: the graph's factors if already built (`BetweenFactors.subset` of a larger graph's).
+        """
         backend = resolve_name(linear_solver)
         fixed = graph.fixed.copy()
         if not fixed.any():
@@ -173,7 +178,7 @@ class Problem:
             graph.edges, fixed, graph.tangent_dim, lower_only=backend == "cholmod", block_order=order
         )
         solver = make_linear_solver(backend, pattern.indptr, pattern.indices, ordered=True)
-        return cls(graph, BetweenFactors.from_graph(graph), pattern, solver)
+        return cls(graph, factors or BetweenFactors.from_graph(graph), pattern, solver)
 
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
