@@ -23,8 +23,9 @@ So the decision is made on least-squares maps instead, in rounds:
 4. Repeat until the classification holds (or `MAX_ROUNDS`, or a round that reaches the
    iteration limit).
 
-Both tests have false-alarm rate `1 - q` per honest loop under the linear-Gaussian model
-(the included loop's `r^2` is stochastically smaller than the leave-one-out statistic).
+Under the linear-Gaussian model the false-alarm rate per honest loop is below `1 - q` for the
+test of step 2 (an included loop's `r^2` is stochastically smaller than chi-square: it pulls the
+map towards itself) and `1 - q_readmit` for step 3.
 
 Rejected loops are tested in order of increasing `r^2`, in batches of `READMIT_BATCH`; testing
 stops at the first batch in which none passes (the all-agree test starts from the largest
@@ -182,13 +183,15 @@ def decide_outliers(
 
     Returns:
         `(poses, inliers, reports)`: refined `(N, n, n)` poses, `(E,)` inlier flags consistent
-        with them (unless `MAX_ROUNDS` was hit), and one `StageReport` per round.
+        with them (unless `MAX_ROUNDS` was hit), and one `StageReport` per round. No round runs
+        when the accepted edges would split the graph into more pieces than all edges do.
     """
     d = graph.tangent_dim
     inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
     reports: list[StageReport] = []
+    components = connected_components(graph.num_poses, graph.edges)[0]  # isolated vertices count too
     for _ in range(MAX_ROUNDS):
-        if connected_components(graph.num_poses, graph.edges[inliers])[0] != 1:
+        if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
             break
         started = time.perf_counter()
         problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver, factors.subset(inliers))

@@ -255,7 +255,8 @@ def run_gnc(
         stage = schedule.next_stage(r, solution.converged)
         if stage is not None and gnc_options.prune_weight > 0:
             keep = active & ~(robust & (stage.loss.weight(r) < gnc_options.prune_weight))
-            if keep.sum() < active.sum() and connected_components(graph.num_poses, graph.edges[keep])[0] == 1:
+            pieces = connected_components(graph.num_poses, graph.edges[keep])[0]
+            if keep.sum() < active.sum() and pieces == connected_components(graph.num_poses, graph.edges)[0]:
                 active = keep
                 problem = Problem.from_graph(graph.subgraph_edges(active), linear_solver, factors.subset(active))
     return GncOutcome(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -184,3 +185,16 @@ def test_a_weak_map_does_not_absorb_gross_outliers(dataset_path):
     log = read_irl(dataset_path("manhattan_noisy.irl"))
     result = solve(log.graph, known_inliers=log.is_odometry)
     np.testing.assert_array_equal(~result.inliers, log.is_outlier)
+
+
+def test_vertices_without_edges_do_not_switch_the_decision_off(tmp_path):
+    shipped = Path(__file__).parents[1] / "datasets"
+    text = (shipped / "grid2d_outliers.g2o").read_text()
+    path = tmp_path / "with_isolated.g2o"
+    path.write_text(text + "VERTEX_SE2 100000 0 0 0\nVERTEX_SE2 100001 5 5 0\n")
+    is_outlier, _ = egnc.datasets.read_labels(shipped / "grid2d_outliers.labels.json")
+    with pytest.warns(egnc.EgncWarning, match="no edge touches"):
+        graph = egnc.read_g2o(path)
+    result = solve(graph)
+    assert len(result.stages) > 3  # the decision rounds ran
+    np.testing.assert_array_equal(~result.inliers, is_outlier)
