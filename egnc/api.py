@@ -22,9 +22,10 @@ from egnc.gnc import (
     run_gnc,
 )
 from egnc.graph import PoseGraph
+from egnc.health import check_representable
 from egnc.initialize import initialize_poses
 from egnc.io import read_g2o
-from egnc.least_squares import STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
+from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
 from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
@@ -173,6 +174,9 @@ def solve(
 
     Returns:
         The `Result`, whose `graph` holds the optimized poses.
+
+    Raises:
+        NumericalError: the graph cannot be solved in double precision (`egnc.health`).
     """
     started = time.perf_counter()
     options = options or SolverOptions()
@@ -183,6 +187,7 @@ def solve(
     robust = ~known
     backend = resolve_name(linear_solver)
     factors = BetweenFactors.from_graph(graph)
+    check_representable(graph)
     graph = graph.with_poses(initial_guess(graph, init, known, backend))
     initial = to_matrices(graph.dim, graph.poses)
     initial_r = factors.whitened_norms(factors.residuals(initial))
@@ -197,7 +202,8 @@ def solve(
     poses, stages = outcome.poses, outcome.stages
     status, message = outcome.status, outcome.message
     robust_r = factors.whitened_norms(factors.residuals(poses))
-    if refine:
+    decide = refine and status != NUMERICAL_FAILURE  # nothing to decide on a failed solve
+    if decide:
         poses, inliers, refinements = decide_outliers(
             graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration
         )
@@ -205,7 +211,7 @@ def solve(
         if refinements:
             status, message = refinements[-1].status, STATUS_MESSAGES[refinements[-1].status]
     r = factors.whitened_norms(factors.residuals(poses))
-    if not refine:
+    if not decide:
         inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
     result_poses = from_matrices(graph.dim, poses)
     initial_fits = classify_inliers(initial_r, robust, graph.tangent_dim, gnc_options)

@@ -48,7 +48,7 @@ from egnc.factors import BetweenFactors
 from egnc.gnc import GncOptions, StageCallback, StageReport, classify_inliers
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
-from egnc.least_squares import IterationCallback, Problem, SolverOptions, solve_least_squares
+from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import NotPositiveDefiniteError
 from egnc.marginals import innovations
 
@@ -216,7 +216,7 @@ def decide_outliers(
         )
         if on_stage is not None:
             on_stage(reports[-1])
-        if np.array_equal(decided, inliers) or refined.status == 0:  # settled, or not converging
+        if np.array_equal(decided, inliers) or refined.status in (0, NUMERICAL_FAILURE):  # settled, or stuck
             break
         inliers = decided
     return poses, inliers, tuple(reports)

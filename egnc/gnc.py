@@ -26,7 +26,7 @@ from egnc.connectivity import connected_components
 from egnc.errors import EgncError
 from egnc.factors import BetweenFactors
 from egnc.graph import PoseGraph
-from egnc.least_squares import IterationCallback, Problem, SolverOptions, solve_least_squares
+from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
 from egnc.losses import FixedWeightLoss, KernelLoss
 from egnc.schedules import Schedule, Stage, ThresholdConvention, exceeds
 
@@ -247,6 +247,8 @@ def run_gnc(
             timings[phase] = timings.get(phase, 0.0) + seconds
         status, message = solution.status, solution.message
         last = stage
+        if solution.status == NUMERICAL_FAILURE:
+            break
         if solution.status == 0 and len(reports) > 1 and reports[-2].status == 0:
             # Two stages in a row that could not converge from the same guess predict the rest (a
             # corrupted odometry edge ran 100 stages of 100 iterations). One alone does not: a slow

@@ -20,7 +20,9 @@ Termination (checked after each accepted step; `status` codes as in `STATUS_MESS
     2. converged: `max |g| <= gradient_tol` (at the current poses);
     3. converged: `||delta|| <= step_tol` (tangent-space step, metres and radians mixed);
     0. `max_iterations` accepted steps were taken;
-    4. no decrease possible (LM: `lambda > max_damping`; GN: the full step increased the cost).
+    4. no decrease possible (LM: `lambda > max_damping`; GN: the full step increased the cost);
+    5. numerical failure: the cost or the gradient is not finite (nothing non-finite reaches the
+       linear solver, so BLAS never sees it). A trial step with a non-finite cost is rejected.
 
 References:
     K. Madsen, H. B. Nielsen, O. Tingleff, "Methods for non-linear least squares problems",
@@ -49,7 +51,10 @@ STATUS_MESSAGES = {
     2: "converged: gradient below gradient_tol",
     3: "converged: step below step_tol",
     4: "stopped: no step decreases the cost",
+    5: "numerical failure: the cost or the gradient is not finite",
 }
+NUMERICAL_FAILURE = 5
+"""Status of a solve stopped by non-finite numbers (`egnc.health` refuses most such inputs earlier)."""
 CONVERGED = (1, 2, 3)
 
 IterationCallback = Callable[[int, float], None]
@@ -250,15 +255,18 @@ def solve_least_squares(
     history = [cost]
     damping, growth = options.initial_damping, 2.0
     iterations = linear_solves = 0
-    status = 0
+    status = 0 if np.isfinite(cost) else NUMERICAL_FAILURE
     data = gradient = None  # normal equations at T, built when a step from T is needed
-    while iterations < options.max_iterations:
+    while status != NUMERICAL_FAILURE and iterations < options.max_iterations:
         if data is None or gradient is None:  # always set and cleared together
             with clock("linearize"):
                 linearization = factors.linearize(T, errors)  # reuses the residuals at T
             with clock("assemble"):
                 data, gradient = pattern.assemble(linearization, factors.information, loss.weight(r))
             diagonal = np.clip(data[pattern.diagonal_slots], 1e-6, 1e32)
+        if not np.all(np.isfinite(data)) or not np.all(np.isfinite(gradient)):
+            status = NUMERICAL_FAILURE
+            break
         if np.max(np.abs(gradient), initial=0.0) <= options.gradient_tol:
             status = 2
             break
@@ -290,14 +298,14 @@ def solve_least_squares(
             T_new = problem.retract(T, step)
             errors_new, r_new, cost_new = evaluate(T_new)
         predicted = 0.5 * _dot(step, (damping * diagonal * step if use_damping else 0.0) - gradient)
-        gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        gain = (cost - cost_new) / predicted if predicted > 0 and np.isfinite(cost_new) else -1.0
         if use_damping and gain <= 1e-3:
             damping, growth = damping * growth, growth * 2
             if damping > options.max_damping:
                 status = 4
                 break
             continue
-        if not use_damping and not cost_new < cost:
+        if not use_damping and not cost_new < cost:  # also a non-finite trial cost
             status = 4
             break
         if use_damping:

@@ -42,11 +42,6 @@ def test_no_crash_no_stdout_no_invalid_json(outcomes, capfd):
     assert capfd.readouterr().out == ""
 
 
-@pytest.mark.xfail(
-    reason="non-finite solutions of huge inputs are the solver's to report (Result.status 5 / NumericalError, "
-    "issue 11); remove this marker once egnc.least_squares reports them",
-    strict=False,
-)
 def test_solutions_are_finite_or_a_reported_failure(outcomes):
     non_finite = [(k, outcome.operator) for k, outcome in enumerate(outcomes) if "non-finite result" in outcome.solves]
     assert non_finite == []

@@ -28,12 +28,11 @@ from egnc.io import read_g2o
 from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
-from egnc.least_squares import SolverOptions
+from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in the README)."""
 
-NUMERICAL_FAILURE_STATUS = 5
 """`Result.status` of a solve that produced non-finite numbers (`egnc.least_squares`)."""
 
 EXAMPLES = """examples:
@@ -265,7 +264,7 @@ def _known_inliers(choice: str, graph: PoseGraph) -> str | np.ndarray:
 
 def _require_finite(result: Result, input_path: Path) -> None:
     """Raise `NumericalError` for a solve the library marked as a numerical failure or that is not finite."""
-    if result.status == NUMERICAL_FAILURE_STATUS:
+    if result.status == NUMERICAL_FAILURE:
         raise NumericalError(f"{input_path}: {result.message}")
     if not (np.isfinite(result.graph.poses).all() and np.isfinite(result.residual_norms).all()):
         raise NumericalError(f"{input_path}: the solution holds non-finite numbers ({result.message})")
