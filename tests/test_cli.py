@@ -24,7 +24,10 @@ REPORT_KEYS = {
     "message", "converged", "poses", "edges", "loop_closures", "known_inliers", "rejected_edges",
     "stages", "timings_s",
 }  # fmt: skip
-PROGRESS_LINE = re.compile(r"^stage \d+: (mu \S+|least squares), \d+ iterations, cost \S+, \d+ edges, [\d.]+ s$")
+PROGRESS_LINE = re.compile(
+    r"^stage \d+: (mu \S+|least squares), \d+ iterations( \(iteration limit\))?, cost \S+, \d+ edges,"
+    r" [\d.]+ s \(elapsed [\d.]+ s\)$"
+)
 STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges"}
 
 

@@ -12,14 +12,14 @@ import argparse
 import math
 import sys
 import warnings
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from egnc import __version__
-from egnc.api import INITIALIZATIONS, METHODS, Result, StageReport, solve
+from egnc.api import INITIALIZATIONS, METHODS, Result, solve
 from egnc.cli.outputs import OutputPlan
+from egnc.cli.progress import Progress
 from egnc.cli.report import report_dict, summary
 from egnc.cli.signals import INTERRUPT_EXIT_CODES, Terminated, sigterm_raises
 from egnc.errors import EgncError, EgncWarning, NumericalError
@@ -161,24 +161,6 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _print_stage_progress() -> Callable[[StageReport], None]:
-    """A callback printing one progress line per finished stage on stderr."""
-    count = 0
-
-    def show(stage: StageReport) -> None:
-        nonlocal count
-        count += 1
-        mu = "least squares" if math.isnan(stage.mu_mean) else f"mu {stage.mu_min:.3g}..{stage.mu_max:.3g}"
-        print(
-            f"stage {count}: {mu}, {stage.iterations} iterations, cost {stage.cost:.6g},"
-            f" {stage.active_edges} edges, {stage.time_s:.2f} s",
-            file=sys.stderr,
-            flush=True,
-        )
-
-    return show
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `egnc-solve`; returns the process exit code (module docstring)."""
     args = build_parser().parse_args(argv)
@@ -221,6 +203,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         read_notes = _warning_notes(caught) + _duplicate_note(graph, args.input)
         _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
         read_count = len(caught)
+        progress = None if args.quiet else Progress(sys.stderr)
         result = solve(
             graph,
             args.method,
@@ -228,7 +211,8 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
             init=args.init,
             linear_solver=args.linear_solver,
             options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
-            on_stage=None if args.quiet else _print_stage_progress(),
+            on_stage=None if progress is None else progress.on_stage,
+            on_iteration=None if progress is None else progress.on_iteration,
         )
     _require_finite(result, args.input)
     report = report_dict(result, read_notes + _warning_notes(caught[read_count:]))

@@ -1,0 +1,64 @@
+"""Progress of a solve on stderr: a live line on a terminal, one line per stage otherwise.
+
+`egnc.solve` reports through two callbacks: `on_iteration(iterations, cost)` after every accepted
+solver step and `on_stage(StageReport)` when a stage ends. On a terminal the iteration line is
+rewritten in place (carriage return), at most `REFRESH_S` apart, and each finished stage leaves
+one line; in a log (not a terminal) only the stage lines are written. Every line carries the
+time since the solve started, so a long stage is visibly alive.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import TextIO
+
+from egnc.gnc import StageReport
+
+REFRESH_S = 0.1
+"""Shortest interval between two rewrites of the live line, seconds."""
+
+
+class Progress:
+    """The `on_stage` and `on_iteration` callbacks of one solve, writing to `stream`.
+
+    Args:
+        stream: where to write (stderr); a terminal gets the live line.
+        clock: seconds, monotonic (replaceable in tests).
+    """
+
+    def __init__(self, stream: TextIO, clock=time.monotonic):
+        self._stream = stream
+        self._clock = clock
+        self._live = stream.isatty()
+        self._started = clock()
+        self._stage = 1
+        self._last_refresh = -math.inf
+        self._line_open = False
+
+    def on_iteration(self, iterations: int, cost: float) -> None:
+        """Rewrite the live line (terminal only, throttled)."""
+        now = self._clock()
+        if not self._live or now - self._last_refresh < REFRESH_S:
+            return
+        self._last_refresh = now
+        self._stream.write(
+            f"\rstage {self._stage}: iteration {iterations}, cost {cost:.6g}, {now - self._started:.1f} s\x1b[K"
+        )
+        self._stream.flush()
+        self._line_open = True
+
+    def on_stage(self, stage: StageReport) -> None:
+        """Write the finished stage's line (over the live line on a terminal)."""
+        mu = "least squares" if math.isnan(stage.mu_mean) else f"mu {stage.mu_min:.3g}..{stage.mu_max:.3g}"
+        limit = " (iteration limit)" if stage.status == 0 else ""
+        prefix = "\r" if self._line_open else ""
+        self._stream.write(
+            f"{prefix}stage {self._stage}: {mu}, {stage.iterations} iterations{limit}, cost {stage.cost:.6g},"
+            f" {stage.active_edges} edges, {stage.time_s:.2f} s (elapsed {self._clock() - self._started:.1f} s)"
+            + ("\x1b[K\n" if self._live else "\n")
+        )
+        self._stream.flush()
+        self._stage += 1
+        self._line_open = False
+        self._last_refresh = -math.inf
