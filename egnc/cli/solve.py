@@ -186,7 +186,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except (KeyboardInterrupt, Terminated) as interruption:
         code, what = INTERRUPT_EXIT_CODES[type(interruption)]
-        print(f"egnc-solve: {what}; no output written", file=sys.stderr)
+        start = "\n" if sys.stderr.isatty() else ""  # below a live progress line, not on it
+        print(f"{start}egnc-solve: {what}; no output written", file=sys.stderr)
         return code
     if not args.quiet:
         print(summary(result, written))
