@@ -28,6 +28,7 @@ from egnc.bench import (
     summarize,
     write_outputs,
 )
+from egnc.cli.arguments import int_at_least, positive_float
 from egnc.datasets import VARIANTS
 from egnc.errors import EgncError
 
@@ -83,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--variant", choices=VARIANTS, default="random", help="false-loop variant (default random)")
     parser.add_argument(
-        "--time-limit", type=_positive, default=300.0, help="seconds per run before it is killed (default 300)"
+        "--time-limit", type=positive_float, default=300.0, help="seconds per run before it is killed (default 300)"
     )
     parser.add_argument(
         "--baseline-method", default="risam", help="method the time ratios are relative to (default risam)"
@@ -95,7 +96,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="egnc's sparse backend for every solve (default auto)",
     )
     parser.add_argument(
-        "--workers", type=_count, help="runs at once on this machine, each in its own child process (default 1)"
+        "--workers",
+        type=int_at_least(1),
+        help="runs at once on this machine, each in its own child process (default 1)",
     )
     parser.add_argument(
         "--dask-scheduler",
@@ -127,26 +130,6 @@ def _ints(text: str) -> list[int]:
         return [int(value) for value in _names(text)]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not value > 0.0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
 
 
 def _package_version(name: str) -> str | None:

@@ -9,7 +9,6 @@ output); 130 / 143 interrupted by SIGINT / SIGTERM (one line, no output).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import warnings
 from pathlib import Path
@@ -18,6 +17,7 @@ import numpy as np
 
 from egnc import __version__
 from egnc.api import INITIALIZATIONS, METHODS, Result, solve
+from egnc.cli.arguments import int_at_least, positive_float
 from egnc.cli.outputs import OutputPlan
 from egnc.cli.progress import Progress
 from egnc.cli.report import report_dict, summary
@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--solver", choices=("lm", "gn"), default="lm", help="Levenberg-Marquardt or Gauss-Newton")
     parser.add_argument(
-        "--max-iters", type=_non_negative_int, default=100, help="maximum solver iterations (default 100)"
+        "--max-iters", type=int_at_least(0), default=100, help="maximum solver iterations (default 100)"
     )
     parser.add_argument(
         "--skip-unknown",
@@ -115,13 +115,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--plot-size",
-        type=_positive_float,
+        type=positive_float,
         nargs=2,
         metavar=("WIDTH", "HEIGHT"),
         help="size of the --plot figure in inches (default 6.4 6.0 for a 2D graph, 7.0 5.6 for 3D)",
     )
     parser.add_argument(
-        "--dpi", type=_positive_float, default=100.0, help="resolution of the --plot image, dots per inch (default 100)"
+        "--dpi", type=positive_float, default=100.0, help="resolution of the --plot image, dots per inch (default 100)"
     )
     parser.add_argument(
         "--trajectory", type=Path, metavar="FILE", help="write the optimized poses here, TUM (.tum) or KITTI (.kitti)"
@@ -137,28 +137,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success but warnings")
     parser.add_argument("--version", action="version", version=f"egnc {__version__}")
     return parser
-
-
-def _non_negative_int(text: str) -> int:
-    """Parse an integer >= 0; anything else is a usage error (exit 2), not a solver error."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    """Parse a finite number > 0; anything else is a usage error (exit 2)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
 
 
 def main(argv: list[str] | None = None) -> int:
