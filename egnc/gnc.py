@@ -2,8 +2,9 @@
 
 Stage k minimizes the loss the schedule chose from stage k-1's residuals (`egnc.schedules`) with
 the sparse GN/LM solver (`egnc.least_squares`), starting from the initial guess (GTSAM's
-`GncOptimizer` protocol) or, with `warm_start`, from stage k-1's poses. Loop closures whose weight
-became negligible leave the factorization (`prune_weight`). After the last stage, loop closures
+`GncOptimizer` protocol) or, with `warm_start`, from stage k-1's poses. Every edge stays in every
+solve: the solver's linear algebra keeps the cost of down-weighted loops low
+(`egnc.least_squares`). After the last stage, loop closures
 (robust edges) with `r^2 > chi2.ppf(outlier_quantile, d)` are classified as outliers (DESIGN.md
 section 4; `outlier_threshold="distance"` compares `r` instead); known inliers never are. Graduated
 methods then re-solve least squares on the accepted edges (`refine_on_inliers`).
@@ -22,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from egnc.connectivity import connected_components
 from egnc.errors import EgncError
 from egnc.factors import BetweenFactors
 from egnc.graph import PoseGraph
@@ -71,17 +71,14 @@ class GncOptions:
             `GncOptimizer` does, from the initial guess (False). From a drifted odometry guess
             the first, least-squares stage bends the map to fit every false loop; warm-started
             stages inherit that basin (manhattanOlson3500 at 10% false loops: ATE 19 m warm,
-            0.0 m restarted; see BENCHMARKS.md).
+            0.0 m restarted; see BENCHMARKS.md). With restarts a stage's poses reach the result
+            only through the next stage's loss, and egnc's and riSAM's last stage puts every
+            loop at `mu = 1` whatever came before: only that stage is solved (the same poses
+            and decision as solving every stage, bit for bit; docs/method.md).
         stage_rel_cost_tol: graduated methods: each GNC stage stops when its relative cost
             decrease falls below `max(this, SolverOptions.rel_cost_tol)` (GTSAM's GNC uses
             1e-5); IRLS converges linearly, so a tight tolerance only costs iterations there.
             The refinement then converges to the caller's tolerance.
-        prune_weight: robust edges whose IRLS weight for the next stage is below this leave the
-            factorization from that stage on (they still count in the residuals the schedule
-            and the outlier report see). Off (0) by default: pruning is irreversible, and
-            after egnc's first stage it dropped true loops that the distorted least-squares
-            stage had left with large residuals (sphere2500 at 30%: precision 0.887 with 1e-4,
-            1.0 without); under stage restarts it saved only 14% on manhattanOlson3500 at 50%.
     """
 
     c: float = 3.0
@@ -94,7 +91,6 @@ class GncOptions:
     readmit_quantile: float = 0.9999
     warm_start: bool = False
     stage_rel_cost_tol: float = 1e-6
-    prune_weight: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("threshold", "outlier_threshold"):
@@ -107,8 +103,6 @@ class GncOptions:
             raise EgncError(f"the kernel shape c must be positive, got {self.c}")
         if self.max_stages < 1:
             raise EgncError(f"max_stages must be at least 1, got {self.max_stages}")
-        if not 0.0 <= self.prune_weight < 1.0:
-            raise EgncError(f"prune_weight must be in [0, 1), got {self.prune_weight}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,7 +115,7 @@ class StageReport:
         cost: the stage's own (robust or weighted) cost at its end.
         time_s: wall time of the stage in seconds.
         status: solver termination code (see `egnc.least_squares.STATUS_MESSAGES`).
-        active_edges: edges in the stage's factorization (the others were pruned).
+        active_edges: edges in the stage's solve (the accepted ones in a refinement round).
     """
 
     mu_min: float
@@ -195,27 +189,27 @@ def run_gnc(
 ) -> GncOutcome:
     """Run `schedule`'s stages on `graph` from `initial_poses` `(N, n, n)`.
 
-    Between stages, robust edges whose weight in the next stage would fall below
-    `gnc_options.prune_weight` leave the factorization (not the residuals the schedule sees):
-    false loop closures join distant poses and their fill-in dominates the Cholesky cost.
-
     Args:
         graph: the pose graph.
         initial_poses: `(N, n, n)` starting poses.
         schedule: decides each stage's loss.
         robust: `(E,)` bool, edges the schedule's kernel applies to.
         solver_options: options of each stage's GN/LM solve.
-        gnc_options: stage limit and pruning weight.
+        gnc_options: stage limit and stage protocol (`warm_start`).
         linear_solver: resolved backend name, `"cholmod"` or `"scipy"`.
         factors: the graph's factors, built once per solve.
         on_stage: called with each `StageReport` as soon as its stage ends (progress display).
         on_iteration: called with `(iterations, cost)` after each accepted step of a stage.
     """
-    active = np.ones(graph.num_edges, dtype=bool)
     problem = Problem.from_graph(graph, linear_solver, factors)
     poses = initial_poses
     r = factors.whitened_norms(factors.residuals(poses))
     last = schedule.first_stage(r)
+    if not gnc_options.warm_start:
+        # Restarted stages reach the result only through the next stage's loss: when the last
+        # loss is fixed in advance (egnc, riSAM: mu = 1 on every loop), the earlier stages cannot
+        # change the poses or the decision, and solving them only costs time.
+        last = schedule.fixed_last_stage() or last
     stage: Stage | None = last
     reports: list[StageReport] = []
     timings: dict[str, float] = {}
@@ -228,7 +222,7 @@ def run_gnc(
             break
         started = time.perf_counter()
         start = poses if gnc_options.warm_start else initial_poses
-        solution = solve_least_squares(problem, start, stage.loss.subset(active), solver_options, on_iteration)
+        solution = solve_least_squares(problem, start, stage.loss, solver_options, on_iteration)
         poses = solution.poses
         r = factors.whitened_norms(factors.residuals(poses))
         reports.append(
@@ -238,7 +232,7 @@ def run_gnc(
                 cost=solution.cost,
                 time_s=time.perf_counter() - started,
                 status=solution.status,
-                active_edges=int(active.sum()),
+                active_edges=graph.num_edges,
             )
         )
         if on_stage is not None:
@@ -255,12 +249,6 @@ def run_gnc(
             # least-squares stage 0 is often followed by robust stages that converge quickly.
             break
         stage = schedule.next_stage(r, solution.converged)
-        if stage is not None and gnc_options.prune_weight > 0:
-            keep = active & ~(robust & (stage.loss.weight(r) < gnc_options.prune_weight))
-            pieces = connected_components(graph.num_poses, graph.edges[keep])[0]
-            if keep.sum() < active.sum() and pieces == connected_components(graph.num_poses, graph.edges)[0]:
-                active = keep
-                problem = Problem.from_graph(graph.subgraph_edges(active), linear_solver, factors.subset(active))
     return GncOutcome(
         poses=poses,
         weights=last.loss.weight(r),

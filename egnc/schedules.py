@@ -69,6 +69,14 @@ class Schedule(Protocol):
         """The next stage after a solve ending at residual norms `r` `(E,)`, or None to stop."""
         ...
 
+    def fixed_last_stage(self) -> Stage | None:
+        """The last stage, when its loss does not depend on any earlier stage's residuals; else None.
+
+        Called after `first_stage`. egnc and riSAM end with `mu = 1` on every robust edge whatever
+        came before; Yang et al.'s schedules carry weights from stage to stage (None).
+        """
+        ...
+
 
 def exceeds(r: np.ndarray, quantile: float, d: int, convention: ThresholdConvention) -> np.ndarray:
     """`(E,)` bool: residual norms above the chi-square `quantile` for dimension `d`.
@@ -114,6 +122,12 @@ class EgncSchedule:
         self._step += 1
         return self._stage()
 
+    def fixed_last_stage(self) -> Stage:
+        """Every robust factor at `mu = 1`: where Algorithm 1 ends, whatever the residuals."""
+        self._mu = np.where(self.robust, 1.0, 0.0)
+        self._step[:] = 2
+        return self._stage()
+
     def _stage(self) -> Stage:
         return Stage(KernelLoss(self._kernel, self._mu, self.robust), np.where(self.robust, self._mu, np.nan))
 
@@ -140,6 +154,11 @@ class RisamSchedule:
             return None
         self._mu = min(1.0, self._mu + 1.2 * (self._mu - self.mu_init + 0.1))
         return self._stage(len(r))
+
+    def fixed_last_stage(self) -> Stage:
+        """The shared `mu = 1`, where the heuristic ends whatever the residuals."""
+        self._mu = 1.0
+        return self._stage(len(self.robust))
 
     def _stage(self, num_edges: int) -> Stage:
         mu = np.full(num_edges, self._mu)
@@ -202,6 +221,10 @@ class YangGncSchedule:
             return None
         return max(float(np.min(self._barc2 / (2.0 * violating - self._barc2))), 1e-6)
 
+    def fixed_last_stage(self) -> None:
+        """None: each stage's weights come from the previous stage's residuals."""
+        return None
+
 
 @dataclass(eq=False)
 class SingleStage:
@@ -217,6 +240,10 @@ class SingleStage:
 
     def next_stage(self, r: np.ndarray, converged: bool) -> Stage | None:
         """Always None: there is one stage."""
+        return None
+
+    def fixed_last_stage(self) -> None:
+        """None: the first stage is the last."""
         return None
 
 

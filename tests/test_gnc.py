@@ -64,15 +64,35 @@ def test_result_reports_per_edge_diagnostics(corrupted_world):
     np.testing.assert_array_equal(result.mu[graph.is_loop_closure], 1.0)  # egnc ends at mu = 1
     assert np.all((result.weights >= 0) & (result.weights <= 1))
     np.testing.assert_array_equal(result.rejected_edges, np.flatnonzero(corrupted.is_outlier))
-    # Three graduated stages (mu = 0, mu*, 1) plus the least-squares refinement.
-    assert len(result.stages) == 4
-    assert result.stages[0].mu_max == 0.0 and result.stages[2].mu_min == 1.0
+    # Restarted stages: only the last (mu = 1) is solved, then the least-squares refinement.
+    assert len(result.stages) == 2
+    assert result.stages[0].mu_min == 1.0 and np.isnan(result.stages[1].mu_min)
+
+
+def test_warm_started_egnc_solves_every_stage(corrupted_world):
+    _, _, corrupted = corrupted_world
+    result = solve(corrupted.graph, "egnc", gnc_options=GncOptions(warm_start=True, refine=False))
+    # Three graduated stages: mu = 0, mu*, 1.
+    assert len(result.stages) == 3
+    assert result.stages[0].mu_max == 0.0 and result.stages[1].mu_min < 1.0 and result.stages[2].mu_min == 1.0
+
+
+@pytest.mark.parametrize("method", ["egnc", "risam"])
+def test_restarted_stages_before_the_fixed_last_one_cannot_change_the_result(corrupted_world, monkeypatch, method):
+    _, _, corrupted = corrupted_world
+    skipped = solve(corrupted.graph, method)
+    for schedule in (EgncSchedule, RisamSchedule):
+        monkeypatch.setattr(schedule, "fixed_last_stage", lambda self: None)
+    every_stage = solve(corrupted.graph, method)
+    assert len(every_stage.stages) > len(skipped.stages)
+    np.testing.assert_array_equal(every_stage.graph.poses, skipped.graph.poses)
+    np.testing.assert_array_equal(every_stage.inliers, skipped.inliers)
 
 
 def test_refinement_can_be_turned_off(corrupted_world):
     dim, clean, corrupted = corrupted_world
     result = solve(corrupted.graph, "egnc", gnc_options=GncOptions(refine=False))
-    assert len(result.stages) == 3
+    assert len(result.stages) == 1
     np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
     # Geman-McClure's optimum is close to, but not exactly, the clean least-squares one.
     error = np.abs(result.graph.poses[:, :dim] - clean.graph.poses[:, :dim]).max()
@@ -159,13 +179,3 @@ def test_every_method_runs_and_reports(corrupted_world, method):
     assert result.method == method
     assert np.isfinite(result.cost) and len(result.stages) >= 1
     assert result.iterations == sum(stage.iterations for stage in result.stages)
-
-
-def test_pruning_drops_negligible_loops_from_the_factorization(corrupted_world):
-    dim, clean, corrupted = corrupted_world
-    graph = corrupted.graph
-    assert all(stage.active_edges == graph.num_edges for stage in solve(graph, "egnc").stages[:3])
-    pruned = solve(graph, "egnc", gnc_options=GncOptions(prune_weight=1e-4))
-    assert min(stage.active_edges for stage in pruned.stages) < graph.num_edges
-    np.testing.assert_array_equal(~pruned.inliers, corrupted.is_outlier)
-    assert np.abs(pruned.graph.poses[:, :dim] - clean.graph.poses[:, :dim]).max() < 1e-6
