@@ -40,6 +40,7 @@ References:
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -50,7 +51,7 @@ from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
 from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import NotPositiveDefiniteError
-from egnc.marginals import innovations
+from egnc.marginals import information_data, innovations
 
 MAX_ROUNDS = 5
 """Refine-and-decide rounds before the classification is taken as it stands."""
@@ -84,17 +85,18 @@ def readmitted(
     candidates = candidates[np.argsort(r[candidates], kind="stable")]
     passed = np.zeros(len(rejected), dtype=bool)
     try:
+        covariance_solve = problem.linear_solver.factorize(information_data(problem, poses))
         # Largest residuals first: one batch refutes "all fit" in a graph with gross outliers.
         for stop in range(len(candidates), 0, -READMIT_BATCH):
             batch = candidates[max(0, stop - READMIT_BATCH) : stop]
-            e, S, _ = _batch_innovations(problem, poses, factors, batch)
+            e, S, _ = _batch_innovations(problem, poses, factors, batch, covariance_solve)
             if not sequentially_consistent(e, S, threshold).all():
                 break
         else:
             return rejected.copy()
         for start in range(0, len(candidates), READMIT_BATCH):
             batch = candidates[start : start + READMIT_BATCH]
-            e, S, well_determined = _batch_innovations(problem, poses, factors, batch)
+            e, S, well_determined = _batch_innovations(problem, poses, factors, batch, covariance_solve)
             rows = (np.flatnonzero(well_determined)[:, None] * e.shape[1] + np.arange(e.shape[1])).ravel()
             ok = np.zeros(len(batch), dtype=bool)
             ok[well_determined] = sequentially_consistent(e[well_determined], S[np.ix_(rows, rows)], threshold)
@@ -107,7 +109,11 @@ def readmitted(
 
 
 def _batch_innovations(
-    problem: Problem, poses: np.ndarray, factors: BetweenFactors, batch: np.ndarray
+    problem: Problem,
+    poses: np.ndarray,
+    factors: BetweenFactors,
+    batch: np.ndarray,
+    covariance_solve: Callable[[np.ndarray], np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Innovations `(K, d)`, covariance `(K d, K d)` and `(K,)` "well determined" flags of edges `batch`, in edge order.
 
@@ -119,7 +125,7 @@ def _batch_innovations(
     0.16); the gross outliers the noisy Manhattan graphs absorb have trace ratios 1.2 to 7.
     """
     loops = factors.subset(np.sort(batch))
-    e, S = innovations(problem, poses, loops)
+    e, S = innovations(problem, poses, loops, covariance_solve)
     d = e.shape[1]
     block = np.arange(len(e))[:, None] * d + np.arange(d)
     own = np.linalg.inv(loops.information)

@@ -43,7 +43,8 @@ from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.graph import PoseGraph
 from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, block_order, make_linear_solver, resolve_name
-from egnc.normal_equations import NormalEquationsPattern
+from egnc.normal_equations import NormalEquationsPattern, edge_products
+from egnc.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, dot
 
 STATUS_MESSAGES = {
     0: "maximum number of iterations reached",
@@ -98,6 +99,11 @@ class SolverOptions:
         step_tol: stop when the step's Euclidean norm `||delta|| <= step_tol`.
         initial_damping: LM's starting `lambda` (Ceres: 1 / initial trust-region radius 1e4).
         max_damping: LM gives up (status 4) when `lambda` exceeds this.
+        linear_method: how each step's linear system is solved (`egnc.step_solver`): `"auto"`
+            (conjugate gradients preconditioned by the Cholesky factorization of the edges
+            whose weight is at least `trust_weight`, when some edge is below it; else direct)
+            or `"direct"` (one factorization of every edge).
+        trust_weight: the IRLS weight from which an edge is in the preconditioner.
     """
 
     method: Literal["lm", "gn"] = "lm"
@@ -107,10 +113,16 @@ class SolverOptions:
     step_tol: float = 1e-12
     initial_damping: float = 1e-8
     max_damping: float = 1e32
+    linear_method: LinearMethod = "auto"
+    trust_weight: float = 1e-4
 
     def __post_init__(self) -> None:
         if self.method not in ("lm", "gn"):
             raise SolverError(f"unknown method {self.method!r}: choose 'lm' or 'gn'")
+        if self.linear_method not in LINEAR_METHODS:
+            raise SolverError(f"unknown linear_method {self.linear_method!r}: choose 'auto' or 'direct'")
+        if not 0.0 < self.trust_weight <= 1.0:
+            raise SolverError(f"trust_weight must be in (0, 1], got {self.trust_weight}")
         if self.max_iterations < 0:
             raise SolverError(f"max_iterations must be >= 0, got {self.max_iterations}")
 
@@ -130,8 +142,10 @@ class SolverResult:
         message: human-readable termination reason.
         time_s: wall time of the solve in seconds.
         timings: seconds spent in `"linearize"` (Jacobians, and the initial residuals),
-            `"assemble"`, `"factorize"` (factorization and solve) and `"update"` (retraction,
-            residuals and cost at the trial poses; an accepted step's residuals are reused).
+            `"assemble"`, `"factorize"` (factorizations and the linear solves, CG included)
+            and `"update"` (retraction, residuals and cost at the trial poses; an accepted
+            step's residuals are reused).
+        linear: direct solves, CG solves and iterations, CG fallbacks (`egnc.step_solver`).
     """
 
     poses: np.ndarray
@@ -144,6 +158,7 @@ class SolverResult:
     message: str
     time_s: float
     timings: dict[str, float] = field(default_factory=dict)
+    linear: LinearStatistics = field(default_factory=LinearStatistics)
 
     @property
     def converged(self) -> bool:
@@ -162,6 +177,7 @@ class Problem:
     factors: BetweenFactors
     pattern: NormalEquationsPattern
     linear_solver: LinearSolver
+    step_solver: StepSolver
 
     @classmethod
     def from_graph(
@@ -183,7 +199,8 @@ class Problem:
             graph.edges, fixed, graph.tangent_dim, lower_only=backend == "cholmod", block_order=order
         )
         solver = make_linear_solver(backend, pattern.indptr, pattern.indices, ordered=True)
-        return cls(graph, factors or BetweenFactors.from_graph(graph), pattern, solver)
+        steps = StepSolver(graph.edges, fixed, graph.tangent_dim, backend, pattern, solver)
+        return cls(graph, factors or BetweenFactors.from_graph(graph), pattern, solver, steps)
 
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
@@ -193,12 +210,6 @@ class Problem:
         moved = T.copy()
         moved[free] = group.rplus(T[free], step.reshape(-1, self.graph.tangent_dim)[free_index[free]])
         return moved
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """`a . b` without BLAS: NumPy's OpenBLAS threads a long `dot`, and its worker then spins
-    while CHOLMOD factorizes, which on 2 cores doubled the factorization time."""
-    return float(np.einsum("i,i->", a, b))
 
 
 class _Clock:
@@ -250,6 +261,8 @@ def solve_least_squares(
         r = factors.whitened_norms(errors.residuals)
         return errors, r, float(np.sum(loss.cost(r)))
 
+    steps = problem.step_solver
+    steps.statistics = LinearStatistics()
     with clock("linearize"):
         errors, r, cost = evaluate(T)
     history = [cost]
@@ -262,7 +275,10 @@ def solve_least_squares(
             with clock("linearize"):
                 linearization = factors.linearize(T, errors)  # reuses the residuals at T
             with clock("assemble"):
-                data, gradient = pattern.assemble(linearization, factors.information, loss.weight(r))
+                weights = loss.weight(r)
+                products = edge_products(linearization, factors.information, weights)
+                data, gradient = pattern.scatter(products)
+                steps.set_system(data, products, weights, options.linear_method, options.trust_weight)
             diagonal = np.clip(data[pattern.diagonal_slots], 1e-6, 1e32)
         if not np.all(np.isfinite(data)) or not np.all(np.isfinite(gradient)):
             status = NUMERICAL_FAILURE
@@ -272,11 +288,9 @@ def solve_least_squares(
             break
         use_damping = options.method == "lm"
         with clock("factorize"):
-            damped = data.copy()
-            if use_damping:
-                damped[pattern.diagonal_slots] += damping * diagonal
+            shift = damping * diagonal if use_damping else np.zeros_like(diagonal)
             try:
-                step = -problem.linear_solver.solve(damped, gradient)
+                step = -steps.solve(shift, gradient)
                 solved = bool(np.all(np.isfinite(step)))
             except NotPositiveDefiniteError:
                 if not use_damping:
@@ -291,13 +305,13 @@ def solve_least_squares(
                 status = 4
                 break
             continue
-        if np.sqrt(_dot(step, step)) <= options.step_tol:
+        if np.sqrt(dot(step, step)) <= options.step_tol:
             status = 3
             break
         with clock("update"):
             T_new = problem.retract(T, step)
             errors_new, r_new, cost_new = evaluate(T_new)
-        predicted = 0.5 * _dot(step, (damping * diagonal * step if use_damping else 0.0) - gradient)
+        predicted = 0.5 * dot(step, (damping * diagonal * step if use_damping else 0.0) - gradient)
         gain = (cost - cost_new) / predicted if predicted > 0 and np.isfinite(cost_new) else -1.0
         if use_damping and gain <= 1e-3:
             damping, growth = damping * growth, growth * 2
@@ -332,4 +346,5 @@ def solve_least_squares(
         message=STATUS_MESSAGES[status],
         time_s=time.perf_counter() - started,
         timings=dict(clock.totals),
+        linear=steps.statistics,
     )

@@ -25,13 +25,12 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Literal, Protocol
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from egnc.errors import EgncError, SolverError
 
@@ -49,6 +48,10 @@ class LinearSolver(Protocol):
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
+        ...
+
+    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize the matrix with CSC values `data` `(nnz,)`; return `rhs -> A^-1 rhs`."""
         ...
 
 
@@ -146,7 +149,9 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
         from sksparse import cholmod
 
         return np.asarray(cholmod.analyze(sp.tril(matrix, format="csc"), ordering_method="amd").P(), dtype=np.int64)
-    lu = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    from scipy.sparse.linalg import splu
+
+    lu = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
     return np.argsort(lu.perm_c).astype(np.int64)
 
 
@@ -170,11 +175,22 @@ class CholmodSolver:
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """Factorize the analysed pattern with values `data` and solve for `rhs`."""
+        return self.factorize(data)(rhs)
+
+    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize the analysed pattern with values `data`; return `rhs -> A^-1 rhs`.
+
+        The returned solve is valid until the next `factorize` (the factor is updated in place).
+        """
         with serial_native_threads():
             try:
                 self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
             except self._cholmod.CholmodNotPositiveDefiniteError as error:
                 raise NotPositiveDefiniteError(f"normal equations are not positive definite ({error})") from None
+        return self._solve
+
+    def _solve(self, rhs: np.ndarray) -> np.ndarray:
+        with serial_native_threads():
             return self.factor(rhs)
 
 
@@ -190,9 +206,15 @@ class ScipySolver:
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """Factorize the matrix with values `data` (SuperLU) and solve for `rhs`."""
+        return self.factorize(data)(rhs)
+
+    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize the matrix with values `data` (SuperLU); return `rhs -> A^-1 rhs`."""
+        from scipy.sparse.linalg import splu
+
         matrix = _matrix(data, self._indices, self._indptr)
         try:
-            lu = spla.splu(
+            lu = splu(
                 matrix,
                 permc_spec=self._permc_spec,
                 diag_pivot_thresh=0.0,
@@ -200,7 +222,7 @@ class ScipySolver:
             )
         except RuntimeError as error:  # SuperLU reports an exactly singular factor this way
             raise NotPositiveDefiniteError(f"normal equations are singular ({error})") from None
-        return lu.solve(rhs)
+        return lu.solve
 
 
 def make_linear_solver(name: str, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False) -> LinearSolver:

@@ -21,6 +21,8 @@ References:
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from egnc.factors import BetweenFactors
@@ -71,19 +73,24 @@ def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> n
     out = np.zeros((len(rows), d, d))
     if n == 0:
         return out
-    data = information_data(problem, poses)
+    covariance_solve = problem.linear_solver.factorize(information_data(problem, poses))
     chunk = max(1, _MAX_RHS_VALUES // (n * d))
     for start in range(0, len(rows), chunk):
         part = rows[start : start + chunk, None]
         B = _transposed_jacobians(problem, part, np.broadcast_to(np.eye(d), (len(part), 1, d, d)))
-        X = problem.linear_solver.solve(data, B)
+        X = covariance_solve(B)
         # the k-th diagonal block of B^T X
         Bk, Xk = (M.T.reshape(len(part), d, n) for M in (B, X))
         out[start : start + len(part)] = Bk @ np.swapaxes(Xk, 1, 2)
     return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
-def innovations(problem: Problem, poses: np.ndarray, loops: BetweenFactors) -> tuple[np.ndarray, np.ndarray]:
+def innovations(
+    problem: Problem,
+    poses: np.ndarray,
+    loops: BetweenFactors,
+    covariance_solve: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Residuals of loop closures left out of `problem` and their joint predicted covariance.
 
     Args:
@@ -91,6 +98,8 @@ def innovations(problem: Problem, poses: np.ndarray, loops: BetweenFactors) -> t
         poses: `(N, n, n)` the solution.
         loops: `K` left-out loop closures (rows of the same poses); keep `K` small (the
             covariance is dense).
+        covariance_solve: `problem.linear_solver.factorize(information_data(problem, poses))`
+            if already computed (several batches at one solution share it).
 
     Returns:
         `(e, S)`: `(K, d)` residuals and `(K d, K d)` covariance `blockdiag(Omega^-1) + A H^-1 A^T`.
@@ -102,7 +111,9 @@ def innovations(problem: Problem, poses: np.ndarray, loops: BetweenFactors) -> t
     if problem.pattern.size and len(e):
         blocks = np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
         B = _transposed_jacobians(problem, loops.edges, blocks)
-        S = B.T @ problem.linear_solver.solve(information_data(problem, poses), B)
+        if covariance_solve is None:
+            covariance_solve = problem.linear_solver.factorize(information_data(problem, poses))
+        S = B.T @ covariance_solve(B)
         S = 0.5 * (S + S.T)
     block = np.arange(len(e))[:, None] * d + np.arange(d)  # (K, d) rows of each loop
     S[block[:, :, None], block[:, None, :]] += np.linalg.inv(loops.information)

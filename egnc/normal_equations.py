@@ -153,9 +153,23 @@ class NormalEquationsPattern:
             information: `(E, d, d)` information matrices `Omega`.
             weights: `(E,)` IRLS weights `w` (1 for plain least squares).
         """
-        S = linearization.stacked
-        d = S.shape[1]
-        W_S = (weights[:, None, None] * information) @ S
-        P = S[:, :, : 2 * d].transpose(0, 2, 1) @ W_S
-        out = np.bincount(self.slots.ravel(), weights=P.ravel(), minlength=self.nnz + self.size + 1)
+        return self.scatter(edge_products(linearization, information, weights))
+
+    def scatter(self, products: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Sum per-edge products `P` `(E, 2d, 2d + 1)` (`edge_products`) into `H`'s data `(nnz,)` and `g` `(n,)`."""
+        out = np.bincount(self.slots.ravel(), weights=products.ravel(), minlength=self.nnz + self.size + 1)
         return out[: self.nnz], out[self.nnz : self.nnz + self.size]
+
+
+def edge_products(linearization: Linearization, information: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Per-edge `P = [J_i | J_j]^T (w Omega) [J_i | J_j | e]` `(E, 2d, 2d + 1)`.
+
+    Args:
+        linearization: residuals `(E, d)` and Jacobians `(E, d, d)` at the current poses.
+        information: `(E, d, d)` information matrices `Omega`.
+        weights: `(E,)` IRLS weights `w`.
+    """
+    S = linearization.stacked
+    d = S.shape[1]
+    W_S = (weights[:, None, None] * information) @ S
+    return S[:, :, : 2 * d].transpose(0, 2, 1) @ W_S

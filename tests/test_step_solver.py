@@ -1,0 +1,103 @@
+"""Conjugate gradients preconditioned by the trusted edges: the same steps and results as a direct solve."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from egnc.api import solve
+from egnc.datasets import add_false_loops, grid_world
+from egnc.errors import SolverError
+from egnc.factors import to_matrices
+from egnc.kernels import make_kernel
+from egnc.least_squares import Problem, SolverOptions
+from egnc.linear_solvers import cholmod_available
+from egnc.normal_equations import edge_products
+
+BACKENDS = [
+    "scipy",
+    pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+]
+
+
+@pytest.fixture(scope="module", params=[2, 3], ids=["2d", "3d"])
+def corrupted(request):
+    """A grid world with 30% false loop closures (false loops join distant poses)."""
+    world = grid_world(request.param, 300, seed=5, noise_scale=0.3)
+    clean = solve(world.graph, "l2")
+    return add_false_loops(world.graph, 30, seed=6, reference_poses=clean.graph.poses)
+
+
+def linearized_system(problem: Problem, graph, poses):
+    """`H` data, gradient, per-edge products and Geman-McClure weights at `poses`."""
+    linearization = problem.factors.linearize(poses)
+    r = problem.factors.whitened_norms(linearization.residuals)
+    weights = np.where(graph.is_loop_closure, make_kernel("gm", c=3.0).weight(r, np.ones_like(r)), 1.0)
+    products = edge_products(linearization, problem.factors.information, weights)
+    data, gradient = problem.pattern.scatter(products)
+    return data, gradient, products, weights
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_preconditioned_step_equals_the_direct_step(corrupted, backend):
+    graph = corrupted.graph
+    problem = Problem.from_graph(graph, backend)
+    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+    assert (weights < 1e-4).sum() > 0.5 * corrupted.is_outlier.sum()  # most false loops are switched off
+    shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
+    steps = problem.step_solver
+    steps.set_system(data, products, weights, "direct")
+    direct = steps.solve(shift, gradient)
+    steps.set_system(data, products, weights, "auto", trust_weight=1e-4)
+    preconditioned = steps.solve(shift, gradient)
+    assert steps.statistics.cg_solves == 1 and steps.statistics.cg_fallbacks == 0
+    assert 0 < steps.statistics.cg_iterations <= 50
+    np.testing.assert_allclose(preconditioned, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_conjugate_gradients_that_stall_fall_back_to_the_direct_solve(corrupted, backend):
+    graph = corrupted.graph
+    problem = Problem.from_graph(graph, backend)
+    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+    shift = np.full(problem.pattern.size, 1e-3)
+    steps = problem.step_solver
+    steps.set_system(data, products, weights, "direct")
+    direct = steps.solve(shift, gradient)
+    steps.set_system(data, products, weights, "auto", trust_weight=0.5)
+    step = steps.solve(shift, gradient, max_cg_iterations=1)
+    assert steps.statistics.cg_fallbacks == 1 and steps.statistics.direct_solves == 2
+    np.testing.assert_allclose(step, direct, rtol=1e-10, atol=1e-12)
+
+
+def test_trusted_edges_that_leave_a_pose_loose_are_not_a_preconditioner(corrupted):
+    graph = corrupted.graph
+    problem = Problem.from_graph(graph, "scipy")
+    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+    weights = weights.copy()
+    weights[np.flatnonzero(graph.is_odometry)[5]] = 1e-9  # cuts the odometry chain where no trusted loop bridges
+    weights[graph.is_loop_closure] = 1e-9
+    steps = problem.step_solver
+    steps.set_system(data, products, weights, "auto", trust_weight=1e-4)
+    steps.solve(np.full(problem.pattern.size, 1e-3), gradient)
+    assert steps.statistics.cg_solves == 0 and steps.statistics.direct_solves == 1
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("method", ["egnc", "gm", "gnc-tls"])
+def test_robust_solves_are_the_same_with_either_linear_method(corrupted, backend, method):
+    results = {
+        linear: solve(corrupted.graph, method, linear_solver=backend, options=SolverOptions(linear_method=linear))
+        for linear in ("direct", "auto")
+    }
+    direct, auto = results["direct"], results["auto"]
+    np.testing.assert_array_equal(auto.inliers, direct.inliers)
+    np.testing.assert_allclose(auto.graph.poses, direct.graph.poses, rtol=0, atol=1e-8)
+    assert [s.iterations for s in auto.stages] == [s.iterations for s in direct.stages]
+
+
+def test_linear_method_options_are_checked():
+    with pytest.raises(SolverError, match="linear_method"):
+        SolverOptions(linear_method="cg")  # type: ignore[arg-type]
+    with pytest.raises(SolverError, match="trust_weight"):
+        SolverOptions(trust_weight=0.0)
