@@ -75,6 +75,8 @@ class GncOptions:
             only through the next stage's loss, and egnc's and riSAM's last stage puts every
             loop at `mu = 1` whatever came before: only that stage is solved (the same poses
             and decision as solving every stage, bit for bit; docs/method.md).
+        every_stage: solve every stage of the schedule even when, under restarts, only the last
+            one decides the result: to watch the graduation stage by stage (same result, more time).
         stage_rel_cost_tol: graduated methods: each GNC stage stops when its relative cost
             decrease falls below `max(this, SolverOptions.rel_cost_tol)` (GTSAM's GNC uses
             1e-5); IRLS converges linearly, so a tight tolerance only costs iterations there.
@@ -90,6 +92,7 @@ class GncOptions:
     readmit: bool = True
     readmit_quantile: float = 0.9999
     warm_start: bool = False
+    every_stage: bool = False
     stage_rel_cost_tol: float = 1e-6
 
     def __post_init__(self) -> None:
@@ -205,7 +208,7 @@ def run_gnc(
     poses = initial_poses
     r = factors.whitened_norms(factors.residuals(poses))
     last = schedule.first_stage(r)
-    if not gnc_options.warm_start:
+    if not (gnc_options.warm_start or gnc_options.every_stage):
         # Restarted stages reach the result only through the next stage's loss: when the last
         # loss is fixed in advance (egnc, riSAM: mu = 1 on every loop), the earlier stages cannot
         # change the poses or the decision, and solving them only costs time.
