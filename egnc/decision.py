@@ -218,6 +218,7 @@ def decide_outliers(
                 time.perf_counter() - started,
                 refined.status,
                 int(inliers.sum()),
+                refined.linear.cg_iterations,
             )
         )
         if on_stage is not None:

@@ -119,6 +119,8 @@ class StageReport:
         time_s: wall time of the stage in seconds.
         status: solver termination code (see `egnc.least_squares.STATUS_MESSAGES`).
         active_edges: edges in the stage's solve (the accepted ones in a refinement round).
+        cg_iterations: conjugate-gradient iterations of the stage's steps (`egnc.step_solver`;
+            0 when every step was solved directly).
     """
 
     mu_min: float
@@ -129,6 +131,7 @@ class StageReport:
     time_s: float
     status: int
     active_edges: int
+    cg_iterations: int = 0
 
 
 StageCallback = Callable[[StageReport], None]
@@ -236,6 +239,7 @@ def run_gnc(
                 time_s=time.perf_counter() - started,
                 status=solution.status,
                 active_edges=graph.num_edges,
+                cg_iterations=solution.linear.cg_iterations,
             )
         )
         if on_stage is not None:

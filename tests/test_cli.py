@@ -28,7 +28,7 @@ PROGRESS_LINE = re.compile(
     r"^stage \d+: (mu \S+|least squares), \d+ iterations( \(iteration limit\))?, cost \S+, \d+ edges,"
     r" [\d.]+ s \(elapsed [\d.]+ s\)$"
 )
-STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges"}
+STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges", "cg_iterations"}
 
 
 def egnc_solve(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:

@@ -68,6 +68,7 @@ def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
                 "time_s": stage.time_s,
                 "status": stage.status,
                 "active_edges": stage.active_edges,
+                "cg_iterations": stage.cg_iterations,
             }
             for stage in result.stages
         ],

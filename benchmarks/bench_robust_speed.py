@@ -1,0 +1,189 @@
+"""The cost of robustness: default robust solve time over the clean least-squares solve time.
+
+    python benchmarks/bench_robust_speed.py [--datasets manhattanOlson3500,sphere2500]
+        [--percent 10,30,50] [--seeds 1] [--backends cholmod,scipy] [--direct] [--before]
+        [--large] [--importtime]
+
+Each row runs in its own child process (its peak resident memory is the row's `peak MiB`):
+read the file, solve its least squares once untimed (the reference and a warm-up), then time
+the clean least-squares solve (`egnc.solve(graph, "l2")`) and the default robust solve
+(`egnc.solve(corrupted, "egnc")`) of the same file with riSAM-protocol false loops; the ratio of
+the two is measured in one process. Iterations are per solved stage (the last one is the
+least-squares refinement); `CG` is the conjugate-gradient iterations of all steps.
+
+- `--direct`: also solve with `SolverOptions(linear_method="direct")` (one factorization of all
+  edges per step) and report whether it rejects the same loops (`same as direct`).
+- `--before`: also solve the way egnc did before (every stage solved, direct factorizations)
+  and report its time and whether it rejects the same loops (slow: minutes on sphere2500).
+- `--large`: add city10000 at 30% and a generated 100k-pose 2D grid at 10% (seed 1).
+- `--importtime`: print the slowest imports of `python -X importtime -c "import egnc"`.
+
+Precision and recall count false loops as positives; ATE is against the clean optimum (m).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+DATASETS = Path(os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets"))
+GRID_100K = "grid2d-100k"
+
+
+def run_case(case: dict) -> dict:
+    """Solve one case in this process and return its figures (the child's side)."""
+    import numpy as np
+
+    from egnc.api import solve
+    from egnc.datasets import add_false_loops, grid_world
+    from egnc.gnc import GncOptions
+    from egnc.io import read_g2o
+    from egnc.least_squares import SolverOptions
+    from egnc.metrics import ate, precision_recall
+
+    backend = case["backend"]
+    if case["dataset"] == GRID_100K:
+        graph = grid_world(2, 100_000, seed=1).graph
+    else:
+        graph = read_g2o(DATASETS / f"{case['dataset']}.g2o")
+    reference = solve(graph, "l2", linear_solver=backend)
+    started = time.perf_counter()
+    clean = solve(graph, "l2", linear_solver=backend)
+    clean_s = time.perf_counter() - started
+    corrupted = add_false_loops(graph, case["percent"], seed=case["seed"], reference_poses=reference.graph.poses)
+    started = time.perf_counter()
+    robust = solve(corrupted.graph, "egnc", linear_solver=backend)
+    robust_s = time.perf_counter() - started
+    precision, recall = precision_recall(~robust.inliers, corrupted.is_outlier)
+    out = {
+        "clean_s": clean_s,
+        "clean_iterations": clean.iterations,
+        "robust_s": robust_s,
+        "iterations": [stage.iterations for stage in robust.stages],
+        "cg": sum(stage.cg_iterations for stage in robust.stages),
+        "false": int(corrupted.is_outlier.sum()),
+        "rejected": int((~robust.inliers).sum()),
+        "precision": precision,
+        "recall": recall,
+        "ate": ate(robust.graph.poses[: graph.num_poses], reference.graph.poses, graph.dim),
+    }
+    variants = {"direct": (SolverOptions(linear_method="direct"), GncOptions())}
+    variants["before"] = (SolverOptions(linear_method="direct"), GncOptions(every_stage=True))
+    for name in ("direct", "before"):
+        if case[name]:
+            options, gnc_options = variants[name]
+            started = time.perf_counter()
+            other = solve(corrupted.graph, "egnc", linear_solver=backend, options=options, gnc_options=gnc_options)
+            out[f"{name}_s"] = time.perf_counter() - started
+            out[f"{name}_same"] = bool(np.array_equal(other.inliers, robust.inliers))
+    return out
+
+
+def run_child(case: dict) -> dict:
+    """Run `case` in a child process; add its peak resident memory (MiB)."""
+    command = [sys.executable, __file__, "--case", json.dumps(case)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
+    assert process.stdout is not None
+    output = process.stdout.read()
+    _, status, usage = os.wait4(process.pid, 0)
+    process.returncode = os.waitstatus_to_exitcode(status)
+    if process.returncode != 0:
+        raise SystemExit(f"case {case} failed with exit code {process.returncode}")
+    figures = json.loads(output.strip().splitlines()[-1])
+    figures["peak_mib"] = usage.ru_maxrss / 1024  # kilobytes on Linux
+    return figures
+
+
+def import_times(top: int = 12) -> list[tuple[int, int, str]]:
+    """`(self us, cumulative us, module)` of the slowest imports of `import egnc`, and the total."""
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", "-c", "import egnc"], capture_output=True, text=True, check=True
+    )
+    rows = []
+    for line in done.stderr.splitlines():
+        if not line.startswith("import time:") or "self [us]" in line:
+            continue
+        own, cumulative, name = (part.strip() for part in line[len("import time:") :].split("|"))
+        rows.append((int(own), int(cumulative), name))
+    egnc_total = next(row for row in rows if row[2] == "egnc")
+    return [egnc_total] + sorted((r for r in rows if r[2] != "egnc"), key=lambda r: -r[1])[:top]
+
+
+def versions() -> str:
+    """Python, NumPy, SciPy, scikit-sparse versions and the core count."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = []
+    for package in ("numpy", "scipy", "scikit-sparse"):
+        try:
+            found.append(f"{package} {version(package)}")
+        except PackageNotFoundError:
+            found.append(f"{package} absent")
+    return f"Python {platform.python_version()}, {', '.join(found)}, {os.cpu_count()} cores"
+
+
+def main() -> None:
+    """Parse arguments, run every case in a child process, print the markdown table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--case", help=argparse.SUPPRESS)
+    parser.add_argument("--datasets", default="manhattanOlson3500,sphere2500")
+    parser.add_argument("--percent", default="10,30,50")
+    parser.add_argument("--seeds", default="1")
+    parser.add_argument("--backends", default="cholmod,scipy")
+    parser.add_argument("--direct", action="store_true")
+    parser.add_argument("--before", action="store_true")
+    parser.add_argument("--large", action="store_true")
+    parser.add_argument("--importtime", action="store_true")
+    args = parser.parse_args()
+    if args.case:
+        print(json.dumps(run_case(json.loads(args.case))))
+        return
+
+    backends = args.backends.split(",")
+    cases = [
+        {"dataset": dataset, "percent": float(percent), "seed": int(seed), "backend": backend}
+        for dataset in args.datasets.split(",")
+        for percent in args.percent.split(",")
+        for seed in args.seeds.split(",")
+        for backend in backends
+    ]
+    if args.large:
+        cases += [{"dataset": "city10000", "percent": 30.0, "seed": 1, "backend": b} for b in backends]
+        cases += [{"dataset": GRID_100K, "percent": 10.0, "seed": 1, "backend": b} for b in backends]
+    print(f"{time.strftime('%Y-%m-%d')}; {versions()}\n")
+    header = (
+        "| dataset | false % | seed | backend | clean l2 (s) | robust (s) | ratio | iterations | CG |"
+        " rejected / false | P | R | ATE (m) | peak MiB |"
+    )
+    extra = (" direct (s) | same as direct |" if args.direct else "") + (
+        " before (s) | same as before |" if args.before else ""
+    )
+    print(header + extra)
+    print("|---|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|" + "---:|---|" * extra.count("same"))
+    for case in cases:
+        f = run_child(case | {"direct": args.direct, "before": args.before})
+        row = (
+            f"| {case['dataset']} | {case['percent']:g} | {case['seed']} | {case['backend']} | {f['clean_s']:.3f}"
+            f" | {f['robust_s']:.3f} | {f['robust_s'] / f['clean_s']:.1f} | {'+'.join(map(str, f['iterations']))}"
+            f" | {f['cg']} | {f['rejected']} / {f['false']} | {f['precision']:.4f} | {f['recall']:.4f}"
+            f" | {f['ate']:.2e} | {f['peak_mib']:.0f} |"
+        )
+        for name in ("direct", "before"):
+            if f"{name}_s" in f:
+                row += f" {f[f'{name}_s']:.2f} | {'yes' if f[f'{name}_same'] else 'NO'} |"
+        print(row, flush=True)
+    if args.importtime:
+        print("\n`python -X importtime -c \"import egnc\"`, slowest (microseconds):\n")
+        print("| module | self | cumulative |\n|---|---:|---:|")
+        for own, cumulative, name in import_times():
+            print(f"| {name} | {own} | {cumulative} |")
+
+
+if __name__ == "__main__":
+    main()
