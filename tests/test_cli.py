@@ -267,3 +267,16 @@ def test_installed_entry_point_runs():
         pytest.skip(f"egnc-solve is not installed beside {sys.executable}")
     run = subprocess.run([script, "--version"], capture_output=True, text=True, timeout=60)
     assert (run.returncode, run.stdout.strip()) == (0, f"egnc {egnc.__version__}")
+
+
+def test_linear_method_changes_how_steps_are_solved_not_what_is_rejected(tmp_path):
+    reports = {}
+    for method in ("direct", "auto"):
+        report = tmp_path / f"{method}.json"
+        run = egnc_solve(DATASETS / "grid3d_outliers.g2o", "--linear-method", method, "--report", report, "-q")
+        assert run.returncode == 0, run.stderr
+        reports[method] = json.loads(report.read_text())
+    assert reports["auto"]["rejected_edges"] == reports["direct"]["rejected_edges"]
+    assert len(reports["auto"]["rejected_edges"]) > 0
+    assert sum(stage["cg_iterations"] for stage in reports["auto"]["stages"]) > 0
+    assert sum(stage["cg_iterations"] for stage in reports["direct"]["stages"]) == 0

@@ -29,6 +29,7 @@ from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
+from egnc.step_solver import LINEAR_METHODS
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in the README)."""
@@ -96,6 +97,13 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("auto", "cholmod", "scipy"),
         default="auto",
         help="sparse backend: CHOLMOD (needs egnc[cholmod]) or SciPy's SuperLU; auto picks CHOLMOD if present",
+    )
+    parser.add_argument(
+        "--linear-method",
+        choices=LINEAR_METHODS,
+        default="auto",
+        help="auto: solve robust steps by conjugate gradients preconditioned by the edges the kernel kept"
+        " (false loops then cost no fill-in); direct: factorize every edge at every step",
     )
     parser.add_argument("--solver", choices=("lm", "gn"), default="lm", help="Levenberg-Marquardt or Gauss-Newton")
     parser.add_argument(
@@ -189,7 +197,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
             known_inliers=known_inliers,
             init=args.init,
             linear_solver=args.linear_solver,
-            options=SolverOptions(method=args.solver, max_iterations=args.max_iters),
+            options=SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method),
             on_stage=None if progress is None else progress.on_stage,
             on_iteration=None if progress is None else progress.on_iteration,
         )
