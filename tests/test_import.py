@@ -79,7 +79,7 @@ def test_asking_for_cholmod_without_scikit_sparse_is_one_clear_error():
 # quantiles); scipy.sparse.csgraph 0.1 s with the scipy.sparse.linalg and scipy.linalg it pulls in
 # (only to grow a spanning tree for missing poses).
 NEVER_FOR_LEAST_SQUARES = ["scipy.stats", "scipy.optimize", "scipy.special", "scipy.sparse.csgraph", "matplotlib"]
-NEVER_AT_IMPORT = [*NEVER_FOR_LEAST_SQUARES, "scipy.sparse.linalg", "scipy.linalg", "sksparse"]
+NEVER_AT_IMPORT = [*NEVER_FOR_LEAST_SQUARES, "scipy.sparse.linalg", "scipy.linalg", "sksparse", "egnc.datasets"]
 
 
 def imported(script: str, heavy: list[str]) -> list[str]:
