@@ -317,6 +317,21 @@ def test_duplicate_edges_and_odometry_in_either_direction(tmp_path):
     np.testing.assert_array_equal(graph.is_odometry, [True, True, True])  # either direction
 
 
+def test_duplicates_are_repeats_of_an_unordered_pair():
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        n = int(rng.integers(2, 12))
+        edges = rng.integers(0, n, size=(int(rng.integers(1, 40)), 2))
+        information = np.tile(np.eye(3), (len(edges), 1, 1))
+        graph = PoseGraph(2, np.arange(n), np.zeros((n, 3)), edges, np.zeros((len(edges), 3)), information)
+        seen: set[tuple[int, int]] = set()
+        expected = []
+        for i, j in edges.tolist():
+            expected.append((min(i, j), max(i, j)) in seen)
+            seen.add((min(i, j), max(i, j)))
+        np.testing.assert_array_equal(graph.is_duplicate, expected)
+
+
 # --- Numbers: one grammar, range checks ----------------------------------------------------------
 
 STRICT_NUMBER_CASES = {
