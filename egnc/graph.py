@@ -128,7 +128,8 @@ class PoseGraph:
     def is_duplicate(self) -> np.ndarray:
         """`(E,)` bool: edges joining the same two vertices as an earlier edge, in either direction."""
         pairs = np.sort(self.edges, axis=1)
-        _, first = np.unique(pairs, axis=0, return_index=True)
+        # One int64 key per unordered pair: 1-D unique is several times faster than unique(axis=0).
+        _, first = np.unique(pairs[:, 0] * self.num_poses + pairs[:, 1], return_index=True)
         duplicate = np.ones(self.num_edges, dtype=bool)
         duplicate[first] = False
         return duplicate

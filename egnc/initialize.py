@@ -16,8 +16,6 @@ about log2(N) NumPy passes rather than N.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.csgraph
 
 from egnc.errors import GraphError
 from egnc.graph import POSE_SIZE
@@ -44,6 +42,11 @@ def spanning_tree(
     Raises:
         GraphError: some pose is not connected to any root.
     """
+    # Imported here: csgraph pulls in scipy.sparse.linalg and scipy.linalg (0.1 s), and only files
+    # with poses missing, or `init="odometry"`, grow a tree.
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     roots = np.unique(np.asarray(roots, dtype=np.int64))
     if len(roots) == 0:

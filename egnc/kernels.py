@@ -56,7 +56,6 @@ from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.special import chdtri
 
 from egnc.errors import EgncError
 
@@ -92,8 +91,25 @@ class Kernel:
         return self.mu_target is not None
 
 
+CHI2_QUANTILES: Mapping[tuple[float, int], float] = MappingProxyType(
+    {
+        (0.99, 3): 11.344866730144373,
+        (0.99, 6): 16.811893829770927,
+        (0.9999, 3): 21.107513466160444,
+        (0.9999, 6): 27.85634123601417,
+    }
+)
+"""`chdtri(d, 1 - quantile)` for the quantiles egnc's defaults use (`GncOptions`), bit for bit
+(tests/test_kernels.py): a least-squares solve then never imports `scipy.special` (30-60 ms)."""
+
+
 def chi2_quantile(quantile: float, d: int) -> float:
-    """`chi2.ppf(quantile, d)`, through `scipy.special` (importing `scipy.stats` costs 0.5 s)."""
+    """`chi2.ppf(quantile, d)`: `CHI2_QUANTILES`, else `scipy.special` (importing `scipy.stats` costs 0.5 s)."""
+    tabulated = CHI2_QUANTILES.get((quantile, d))
+    if tabulated is not None:
+        return tabulated
+    from scipy.special import chdtri
+
     return float(chdtri(d, 1.0 - quantile))
 
 

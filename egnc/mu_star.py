@@ -44,7 +44,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.special import expit
 
 from egnc.errors import EgncError
 
@@ -63,6 +62,8 @@ def convexity_margin(mu: ArrayLike, log_r2: ArrayLike, log_c2: ArrayLike) -> np.
     Returns:
         `q^2 + (1 - 2 mu) s ((mu + 2) q + (1 - mu) s)` (bounded for any r), broadcast shape.
     """
+    from scipy.special import expit  # here: a least-squares solve never needs scipy.special
+
     mu = np.asarray(mu, dtype=np.float64)
     z = mu * np.asarray(log_r2, dtype=np.float64) - np.asarray(log_c2, dtype=np.float64)
     q, s = expit(-z), expit(z)

@@ -15,6 +15,7 @@ from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
 from egnc.graph import PoseGraph
 from egnc.initialize import spanning_tree
 from egnc.io import read_g2o, write_g2o
+from egnc.io.numbers import is_float, is_integer, parse_floats, parse_integers
 from egnc.lie import se2
 
 # From ../shared/datasets/README.md: file -> (dim, VERTEX lines, EDGE lines). kitti_00 has no
@@ -316,6 +317,21 @@ def test_duplicate_edges_and_odometry_in_either_direction(tmp_path):
     np.testing.assert_array_equal(graph.is_odometry, [True, True, True])  # either direction
 
 
+def test_duplicates_are_repeats_of_an_unordered_pair():
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        n = int(rng.integers(2, 12))
+        edges = rng.integers(0, n, size=(int(rng.integers(1, 40)), 2))
+        information = np.tile(np.eye(3), (len(edges), 1, 1))
+        graph = PoseGraph(2, np.arange(n), np.zeros((n, 3)), edges, np.zeros((len(edges), 3)), information)
+        seen: set[tuple[int, int]] = set()
+        expected = []
+        for i, j in edges.tolist():
+            expected.append((min(i, j), max(i, j)) in seen)
+            seen.add((min(i, j), max(i, j)))
+        np.testing.assert_array_equal(graph.is_duplicate, expected)
+
+
 # --- Numbers: one grammar, range checks ----------------------------------------------------------
 
 STRICT_NUMBER_CASES = {
@@ -336,6 +352,52 @@ def test_numbers_follow_one_strict_grammar(case, tmp_path):
     with pytest.raises(G2oFormatError) as caught:
         read_g2o(path)
     assert str(caught.value).startswith(f"{path}:2: ") and fragment in str(caught.value)
+
+
+NUMBER_TOKENS = [
+    "0", "-0", "007", "1.", ".5", "-.5", "1.5e-3", "1E+05", "1e5", "-7", "9223372036854775807",
+    "-9223372036854775808", "9223372036854775808", "nan", "-Inf", "infinity",
+    "+3", "+.5", "1_0", "0x10", "1e", "e5", ".", "-", "--1", "1-2", "1.2.3", "1e5e5", "1+", "",
+    " 1", "1 ", "1,2", "\u0663",
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("token", NUMBER_TOKENS)
+def test_parsers_accept_exactly_the_grammar(token):
+    # The parsers skip the per-token match for tokens of digits, `.`, `e`, `+`, `-`: same verdicts.
+    floats = parse_floats(["1", token])
+    assert (floats is not None) == is_float(token)
+    if floats is not None:
+        np.testing.assert_array_equal(floats, [1.0, float(token)])
+    integers = parse_integers(["1", token])
+    fits = is_integer(token) and -(2**63) <= int(token) < 2**63
+    assert (integers is not None) == fits
+    if integers is not None:
+        np.testing.assert_array_equal(integers, [1, int(token)])
+
+
+@pytest.mark.parametrize("name", READABLE)
+def test_plain_files_split_as_the_line_loop_does(name, dataset_path):
+    # The dataset files have no comment: the fast path splits them, and must agree with the loop.
+    text = dataset_path(name).read_text()
+    lines = text.split("\n")
+    plain = g2o_module._split_plain_records(lines)
+    assert plain is not None
+    context = g2o_module._Context(dataset_path(name), text, len(lines))
+    assert plain == g2o_module._split_records(lines, context, skip_unknown=False)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [V2 + "FIX\n" + E2, V2 + "FIX 0\n" + E2 + V3, V2 + "VERTEX_SE2 1 0 0\n" + E2, V2 + "VERTEX_XY 1 0 0\n" + E2],
+)
+def test_files_with_anything_to_report_are_left_to_the_line_loop(text):
+    assert g2o_module._split_plain_records(text.split("\n")) is None
+
+
+def test_plain_fix_lines(tmp_path):
+    graph = read_g2o(write_text(tmp_path, V2 + V2B + "FIX 1\n" + E2 + "FIX 0 1\n"))
+    np.testing.assert_array_equal(graph.fixed, [True, True])
 
 
 def test_accepted_number_forms(tmp_path):

@@ -74,13 +74,39 @@ def test_asking_for_cholmod_without_scikit_sparse_is_one_clear_error():
     assert "pip install 'egnc[cholmod]'" in line
 
 
-@pytest.mark.parametrize("module", ["egnc", "egnc.cli.solve"])
-def test_start_up_imports_nothing_a_small_solve_does_not_use(module):
-    # scipy.stats alone cost 0.5 s of every egnc-solve; scipy.optimize is only needed for mu*.
-    script = f"import sys, {module}; print(sorted(m for m in sys.modules if m.split('.')[0:2] in HEAVY))"
-    heavy = "[['scipy', 'stats'], ['scipy', 'optimize'], ['matplotlib'], ['sksparse']]"
+# Modules a least-squares `egnc-solve -o` never uses, with what importing them costs: scipy.stats
+# 0.5 s; scipy.optimize 0.1 s (mu* only); scipy.special 30-60 ms (mu*, untabulated chi-square
+# quantiles); scipy.sparse.csgraph 0.1 s with the scipy.sparse.linalg and scipy.linalg it pulls in
+# (only to grow a spanning tree for missing poses).
+NEVER_FOR_LEAST_SQUARES = ["scipy.stats", "scipy.optimize", "scipy.special", "scipy.sparse.csgraph", "matplotlib"]
+NEVER_AT_IMPORT = [*NEVER_FOR_LEAST_SQUARES, "scipy.sparse.linalg", "scipy.linalg", "sksparse", "egnc.datasets"]
+
+
+def imported(script: str, heavy: list[str]) -> list[str]:
+    """The modules of `heavy` loaded after running `script` in a fresh interpreter."""
+    check = f"import sys\nprint([name for name in {heavy!r} if name in sys.modules])"
     run = subprocess.run(
-        [sys.executable, "-c", f"HEAVY = {heavy}\n{script}"], capture_output=True, text=True, timeout=120
+        [sys.executable, "-c", textwrap.dedent(script) + "\n" + check], capture_output=True, text=True, timeout=120
     )
     assert run.returncode == 0, run.stderr
-    assert run.stdout.strip() == "[]"
+    return eval(run.stdout)
+
+
+@pytest.mark.parametrize("module", ["egnc", "egnc.cli.solve"])
+def test_start_up_imports_nothing_a_small_solve_does_not_use(module):
+    assert imported(f"import {module}", NEVER_AT_IMPORT) == []
+
+
+def test_least_squares_solve_and_write_import_nothing_they_do_not_use(tmp_path):
+    grid2d = Path(__file__).parents[1] / "datasets" / "grid2d.g2o"
+    script = f"""
+        from egnc.cli.solve import main
+
+        assert main([{str(grid2d)!r}, "--method", "l2", "-q", "-o", {str(tmp_path / "out.g2o")!r}]) == 0
+        """
+    assert imported(script, NEVER_FOR_LEAST_SQUARES) == []
+    # A graph with poses missing grows a spanning tree, the one use of csgraph on this path.
+    text = "".join(line + "\n" for line in grid2d.read_text().splitlines() if not line.startswith("VERTEX_SE2 5 "))
+    (tmp_path / "missing.g2o").write_text(text)
+    script = f"import egnc\negnc.read_g2o({str(tmp_path / 'missing.g2o')!r})"
+    assert imported(script, ["scipy.sparse.csgraph"]) == ["scipy.sparse.csgraph"]

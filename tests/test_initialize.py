@@ -140,3 +140,24 @@ def test_require_connected():
     require_connected(np.array([3, 4, 9]), np.array([[0, 1], [2, 1]]))
     with pytest.raises(GraphError, match=r"^g\.g2o: .*2 connected components: \{3\} \(1 pose\), \{4, 9\} \(2 poses\)"):
         require_connected(np.array([3, 4, 9]), np.array([[1, 2]]), source="g.g2o")
+
+
+def test_connected_components_match_scipy_csgraph():
+    import scipy.sparse
+    import scipy.sparse.csgraph
+
+    rng = np.random.default_rng(7)
+    graphs = [(int(n), rng.integers(0, n, size=(int(rng.integers(0, 2 * n)), 2))) for n in rng.integers(1, 60, 300)]
+    chain = rng.permutation(5000)  # one long path, its edges shuffled: many hooking passes
+    graphs.append((5000, np.column_stack((chain[:-1], chain[1:]))[rng.permutation(4999)]))
+    graphs.append((4, np.zeros((0, 2), dtype=np.int64)))
+    for n, edges in graphs:
+        adjacency = scipy.sparse.csr_array((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+        expected_count, expected = scipy.sparse.csgraph.connected_components(adjacency, directed=False)
+        count, labels = connected_components(n, edges)
+        assert count == expected_count
+        # The same partition, numbered by each component's lowest row.
+        _, lowest_row = np.unique(expected, return_index=True)
+        rank = np.empty(expected_count, dtype=np.int64)
+        rank[np.argsort(lowest_row)] = np.arange(expected_count)
+        assert np.array_equal(labels, rank[expected])

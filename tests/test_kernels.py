@@ -464,3 +464,14 @@ def test_gnc_tls_matches_gtsam(mu):
     middle = np.sqrt(BARC2_3D * mu * (mu + 1) / f) - mu
     classic = np.where(f >= hi, 0.0, np.where(f <= lo, 1.0, middle))
     np.testing.assert_allclose(ours.weight(R_GTSAM, mu), classic, rtol=1e-13, atol=1e-15)
+
+
+def test_tabulated_chi2_quantiles_are_scipys_bit_for_bit():
+    from scipy.special import chdtri
+
+    from egnc.kernels import CHI2_QUANTILES, chi2_quantile
+
+    for (quantile, d), value in CHI2_QUANTILES.items():
+        assert value == float(chdtri(d, 1.0 - quantile)), (quantile, d)
+        assert chi2_quantile(quantile, np.int64(d)) == value
+    assert chi2_quantile(0.95, 3) == float(chdtri(3, 1.0 - 0.95))  # not tabulated: computed

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from egnc.datasets.labels import read_labels
 from egnc.errors import EgncError, G2oFormatError
 from egnc.io.numbers import check_line_characters, is_integer
 from egnc.io.text import read_text
@@ -33,6 +32,9 @@ def read_known_inliers(path: str | os.PathLike, num_edges: int) -> np.ndarray:
     path = Path(path)
     text = read_text(path)
     if text.lstrip().startswith("{"):
+        # Imported here: egnc.datasets loads every dataset generator, which egnc-solve rarely needs.
+        from egnc.datasets.labels import read_labels
+
         is_outlier, _ = read_labels(path)
         if len(is_outlier) != num_edges:
             raise EgncError(f"{path}: labels describe {len(is_outlier)} edges, the graph has {num_edges}")

@@ -37,7 +37,7 @@ from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
 from egnc.io.information import INFORMATION_MODES, InformationMode, not_positive_definite, repair_information
-from egnc.io.numbers import check_line_characters, is_float, is_integer, parse_floats
+from egnc.io.numbers import check_line_characters, is_float, is_integer, parse_floats, parse_integers
 from egnc.io.text import read_text
 
 _MIN_QUATERNION_NORM = 1e-6
@@ -77,6 +77,8 @@ _TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values())
 _FIX = "FIX"
 _TAG_NAME = re.compile(r"[A-Z][A-Z0-9_:]*", re.IGNORECASE)
 """What a record tag looks like (`VERTEX_XY`, `PARAMS_SE3OFFSET`, ...): anything else is damage, never skipped."""
+_NOT_PLAIN_TEXT = re.compile(r"[^\t\n\x20-\x22\x24-\x7e]")
+"""A character that needs `_split_records`' line loop: a comment's `#`, CR, non-ASCII, controls."""
 
 
 @dataclass
@@ -135,7 +137,8 @@ def read_g2o(
     text = read_text(path)
     lines = text.split("\n")
     context = _Context(path, text, len(lines))
-    dim, vertices, edges, fixes, unknown = _split_records(lines, context, skip_unknown)
+    split = _split_plain_records(lines) if _NOT_PLAIN_TEXT.search(text) is None else None
+    dim, vertices, edges, fixes, unknown = split or _split_records(lines, context, skip_unknown)
     if dim is None or not edges.rows:
         raise context.error("no EDGE_SE2 or EDGE_SE3:QUAT lines: a pose graph needs edges")
 
@@ -299,6 +302,38 @@ def _split_records(
     return dim, vertices, edges, fixes, unknown
 
 
+def _split_plain_records(lines: list[str]) -> tuple[int | None, _Records, _Records, _Records, list[str]] | None:
+    """`_split_records` for a plain file, or None to leave it to that loop.
+
+    Plain means: lines of printable ASCII, spaces and tabs (no comment, no CR: `_NOT_PLAIN_TEXT`,
+    checked by the caller on the whole text), only this module's tags and `FIX`, one dimension,
+    every field count right. Each of these is checked at once over all lines (a tag at a time),
+    several times faster than the loop; whatever fails is left to the loop, which finds the first
+    bad line and its message.
+    """
+    rows = [line.split() for line in lines]
+    tags = [fields[0] if fields else "" for fields in rows]
+    names = set(tags) - {""}
+    if not names <= _TAGS.keys() | {_FIX}:
+        return None
+    dims = {_TAGS[name].dim for name in names - {_FIX}}
+    if len(dims) > 1:
+        return None
+    dim = dims.pop() if dims else None
+    grouped = {}
+    for name in names:
+        numbers = [number for number, tag in enumerate(tags, start=1) if tag == name]
+        group = _Records([rows[number - 1] for number in numbers], numbers)
+        lengths = set(map(len, group.rows))
+        if (min(lengths) < 2) if name == _FIX else (lengths != {1 + _TAGS[name].num_fields}):
+            return None
+        grouped[name] = group
+    empty = _Records([], [])
+    vertices = grouped.get(_VERTEX_TAGS[dim].name, empty) if dim else empty
+    edges = grouped.get(_EDGE_TAGS[dim].name, empty) if dim else empty
+    return dim, vertices, edges, grouped.get(_FIX, empty), []
+
+
 def _describe_skipped(path: Path, unknown: list[str]) -> str:
     """One sentence: how many lines of which tags were skipped."""
     counts = collections.Counter(line.split()[0] for line in unknown)
@@ -311,17 +346,15 @@ def _describe_skipped(path: Path, unknown: list[str]) -> str:
 
 def _to_arrays(records: _Records, tag: _Tag, context: _Context) -> tuple[np.ndarray, np.ndarray]:
     """Convert rows to `(n, num_ids)` int64 ids and `(n, num_values)` float64 values (`egnc.io.numbers`)."""
-    n, k = len(records.rows), 1 + tag.num_ids
-    id_tokens = list(itertools.chain.from_iterable(row[1:k] for row in records.rows))
-    values = parse_floats(list(itertools.chain.from_iterable(row[k:] for row in records.rows)))
-    if values is None or not all(map(is_integer, set(id_tokens))):
+    # Every row has 1 + num_fields tokens (checked by `_split_records`): take the tokens column by
+    # column with list slices, which is faster than slicing each row, then transpose the numbers.
+    n, k, width = len(records.rows), 1 + tag.num_ids, 1 + tag.num_fields
+    tokens = list(itertools.chain.from_iterable(records.rows))
+    ids = parse_integers(list(itertools.chain.from_iterable(tokens[c::width] for c in range(1, k))))
+    values = parse_floats(list(itertools.chain.from_iterable(tokens[c::width] for c in range(k, width))))
+    if ids is None or values is None:
         _raise_first_bad_field(records, tag, context)
-    try:
-        ids = np.array(id_tokens, dtype=np.int64).reshape(n, tag.num_ids)
-    except OverflowError:
-        _raise_first_bad_field(records, tag, context)
-    assert values is not None  # _raise_first_bad_field always raises
-    return ids, values.reshape(n, tag.num_values)
+    return ids.reshape(tag.num_ids, n).T.copy(), values.reshape(tag.num_values, n).T.copy()
 
 
 def _raise_first_bad_field(records: _Records, tag: _Tag, context: _Context) -> NoReturn:
@@ -479,8 +512,11 @@ def _check_writable(graph: PoseGraph) -> None:
 
 
 def _format_records(tag: str, ids: np.ndarray, values: np.ndarray) -> str:
-    """Format rows as `TAG id... value...` lines; `repr` gives the shortest exact float text."""
-    return "".join(
-        f"{tag} {' '.join(map(str, row_ids))} {' '.join(map(repr, row_values))}\n"
-        for row_ids, row_values in zip(ids.tolist(), values.tolist())
-    )
+    """Format rows as `TAG id... value...` lines; `%r` (`repr`) gives the shortest exact float text.
+
+    One `%` formatting of all rows at once, about twice as fast as formatting row by row.
+    """
+    n, num_ids = ids.shape
+    line = tag + " %d" * num_ids + " %r" * values.shape[1] + "\n"
+    fields = np.hstack((ids.astype(object), values.astype(object)))  # Python ints and floats
+    return (line * n) % tuple(fields.ravel().tolist())
