@@ -15,7 +15,8 @@ least-squares refinement); `CG` is the conjugate-gradient iterations of all step
   edges per step) and report whether it rejects the same loops (`same as direct`).
 - `--before`: also solve the way egnc did before (every stage solved, direct factorizations)
   and report its time and whether it rejects the same loops (slow: minutes on sphere2500).
-- `--large`: add city10000 at 30% and a generated 100k-pose 2D grid at 10% (seed 1).
+- `--large`: add city10000 at 30% and a generated 100k-pose 2D grid at 10% (seed 1);
+  `--datasets "" --large` runs only those.
 - `--importtime`: print the slowest imports of `python -X importtime -c "import egnc"`.
 
 Precision and recall count false loops as positives; ATE is against the clean optimum (m).
@@ -148,7 +149,7 @@ def main() -> None:
     backends = args.backends.split(",")
     cases = [
         {"dataset": dataset, "percent": float(percent), "seed": int(seed), "backend": backend}
-        for dataset in args.datasets.split(",")
+        for dataset in filter(None, args.datasets.split(","))
         for percent in args.percent.split(",")
         for seed in args.seeds.split(",")
         for backend in backends

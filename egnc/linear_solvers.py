@@ -25,8 +25,10 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import os
+import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from types import ModuleType
 from typing import Literal, Protocol
 
 import numpy as np
@@ -125,6 +127,24 @@ def serial_native_threads() -> Iterator[None]:
             blas.openblas_set_num_threads(blas_threads)
 
 
+def _cholmod_module() -> ModuleType:
+    """Import scikit-sparse's CHOLMOD wrapper, its OpenBLAS starting with one thread.
+
+    CHOLMOD's calls run on one thread anyway (`serial_native_threads`); an OpenBLAS that starts
+    with more spins its idle workers (0.1 s of system time in a one-second `egnc-solve`). The
+    environment is restored at once, and a thread count the user chose is left alone.
+    """
+    if "sksparse.cholmod" not in sys.modules and "OPENBLAS_NUM_THREADS" not in os.environ:
+        os.environ["OPENBLAS_NUM_THREADS"] = "1"
+        try:
+            from sksparse import cholmod
+        finally:
+            del os.environ["OPENBLAS_NUM_THREADS"]
+    from sksparse import cholmod
+
+    return cholmod
+
+
 def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarray:
     """Fill-reducing order of the unknown blocks for backend `name` (`"cholmod"` or `"scipy"`).
 
@@ -146,8 +166,7 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
     degree = -np.asarray(adjacency.sum(axis=0)).ravel()
     matrix = (adjacency + sp.diags(degree + 1.0)).tocsc()
     if name == "cholmod":
-        from sksparse import cholmod
-
+        cholmod = _cholmod_module()
         return np.asarray(cholmod.analyze(sp.tril(matrix, format="csc"), ordering_method="amd").P(), dtype=np.int64)
     from scipy.sparse.linalg import splu
 
@@ -165,8 +184,7 @@ class CholmodSolver:
     name = "cholmod"
 
     def __init__(self, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False):
-        from sksparse import cholmod
-
+        cholmod = _cholmod_module()
         self._cholmod = cholmod
         self._indices = indices.astype(np.int32)
         self._indptr = indptr.astype(np.int32)

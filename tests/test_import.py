@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib.util
+import os
 import subprocess
 import sys
 import textwrap
@@ -110,3 +112,23 @@ def test_least_squares_solve_and_write_import_nothing_they_do_not_use(tmp_path):
     (tmp_path / "missing.g2o").write_text(text)
     script = f"import egnc\negnc.read_g2o({str(tmp_path / 'missing.g2o')!r})"
     assert imported(script, ["scipy.sparse.csgraph"]) == ["scipy.sparse.csgraph"]
+
+
+@pytest.mark.skipif(importlib.util.find_spec("sksparse") is None, reason="no scikit-sparse")
+def test_cholmod_starts_its_openblas_single_threaded_and_restores_the_environment():
+    script = """
+        import ctypes, os
+        import egnc
+        egnc.solve(egnc.read_g2o({path!r}), "l2", linear_solver="cholmod")
+        assert "OPENBLAS_NUM_THREADS" not in os.environ
+        try:
+            blas = ctypes.CDLL("libblas.so.3", mode=os.RTLD_NOLOAD)
+        except OSError:
+            blas = None
+        if blas is not None and hasattr(blas, "openblas_get_num_threads"):
+            assert blas.openblas_get_num_threads() == 1, blas.openblas_get_num_threads()
+        print("ok")
+    """.format(path=str(Path(__file__).parents[1] / "datasets" / "grid2d.g2o"))
+    env = {key: value for key, value in os.environ.items() if key != "OPENBLAS_NUM_THREADS"}
+    done = subprocess.run([sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True, env=env)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
