@@ -42,9 +42,9 @@ import numpy as np
 from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.graph import PoseGraph
-from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, block_order, make_linear_solver, resolve_name
+from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, resolve_name
 from egnc.normal_equations import NormalEquationsPattern, edge_products
-from egnc.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, dot
+from egnc.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, analysed_pattern, dot
 
 STATUS_MESSAGES = {
     0: "maximum number of iterations reached",
@@ -192,13 +192,7 @@ class Problem:
         if not fixed.any():
             fixed[0] = True
         # Unknown blocks in a fill-reducing order of the free poses, computed once.
-        free_block = np.cumsum(~fixed) - 1
-        joined = graph.edges[~fixed[graph.edges].any(axis=1)]
-        order = block_order(backend, int(np.count_nonzero(~fixed)), free_block[joined])
-        pattern = NormalEquationsPattern.build(
-            graph.edges, fixed, graph.tangent_dim, lower_only=backend == "cholmod", block_order=order
-        )
-        solver = make_linear_solver(backend, pattern.indptr, pattern.indices, ordered=True)
+        pattern, solver = analysed_pattern(graph.edges, fixed, graph.tangent_dim, backend)
         steps = StepSolver(graph.edges, fixed, graph.tangent_dim, backend, pattern, solver)
         return cls(graph, factors or BetweenFactors.from_graph(graph), pattern, solver, steps)
 

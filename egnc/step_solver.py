@@ -57,17 +57,32 @@ class _TrustedSystem:
     """Pattern and solver of one trusted edge set, and where its unknowns sit in the full system.
 
     Attributes:
-        edges: `(E,)` bool, the trusted edges.
         pattern: normal-equations pattern of the trusted edges, in its own fill-reducing order.
-        solver: linear solver analysed for `pattern` (None: the trusted edges leave a pose
-            unconstrained, so they cannot precondition).
+        solver: linear solver analysed for `pattern`.
         unknowns: `(n,)` full-system index of each trusted-system unknown.
     """
 
-    edges: np.ndarray
-    pattern: NormalEquationsPattern | None
-    solver: LinearSolver | None
+    pattern: NormalEquationsPattern
+    solver: LinearSolver
     unknowns: np.ndarray
+
+
+def analysed_pattern(
+    edges: np.ndarray, fixed: np.ndarray, d: int, backend: Literal["cholmod", "scipy"]
+) -> tuple[NormalEquationsPattern, LinearSolver]:
+    """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and a solver analysed for it.
+
+    Args:
+        edges: `(E, 2)` pose rows of the edges.
+        fixed: `(N,)` bool, poses without unknowns.
+        d: tangent dimension.
+        backend: resolved linear-solver backend.
+    """
+    free_block = np.cumsum(~fixed) - 1
+    joined = edges[~fixed[edges].any(axis=1)]
+    order = block_order(backend, int(np.count_nonzero(~fixed)), free_block[joined])
+    pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=backend == "cholmod", block_order=order)
+    return pattern, make_linear_solver(backend, pattern.indptr, pattern.indices, ordered=True)
 
 
 @dataclass
@@ -106,7 +121,7 @@ class StepSolver:
         self._edges, self._fixed, self._d, self._backend = edges, fixed, d, backend
         self.pattern, self.direct_solver = pattern, direct_solver
         self._components = 0  # of the whole graph, counted when a trusted set first needs it
-        self._trusted_systems: OrderedDict[bytes, _TrustedSystem] = OrderedDict()
+        self._trusted_systems: OrderedDict[bytes, _TrustedSystem | None] = OrderedDict()
         self.statistics = LinearStatistics()
         self._data = np.empty(0)
         self._trusted: _TrustedSystem | None = None
@@ -134,10 +149,9 @@ class StepSolver:
         trusted = weights >= trust_weight
         self._trusted = None
         if method == "auto" and not trusted.all():
-            system = self._trusted_system(trusted)
-            if system.solver is not None and system.pattern is not None:
-                self._trusted = system
-                self._trusted_data = system.pattern.scatter(products[trusted])[0]
+            self._trusted = self._trusted_system(trusted)
+            if self._trusted is not None:
+                self._trusted_data = self._trusted.pattern.scatter(products[trusted])[0]
 
     def solve(
         self, shift: np.ndarray, rhs: np.ndarray, cg_tol: float = 1e-10, max_cg_iterations: int = 200
@@ -165,7 +179,6 @@ class StepSolver:
         self, trusted: _TrustedSystem, shift: np.ndarray, rhs: np.ndarray, tol: float, max_iterations: int
     ) -> np.ndarray | None:
         """Preconditioned CG from `x = 0`; None if it does not reach `tol` in `max_iterations`."""
-        assert trusted.pattern is not None and trusted.solver is not None
         preconditioner_data = self._trusted_data.copy()
         preconditioner_data[trusted.pattern.diagonal_slots] += shift[trusted.unknowns]
         try:
@@ -218,33 +231,27 @@ class StepSolver:
 
         return multiply
 
-    def _trusted_system(self, trusted: np.ndarray) -> _TrustedSystem:
-        """The cached pattern and analysis of the `trusted` `(E,)` edge set, built on first use."""
+    def _trusted_system(self, trusted: np.ndarray) -> _TrustedSystem | None:
+        """The cached pattern and analysis of the `trusted` `(E,)` edge set, built on first use; None
+        when the trusted edges leave a pose unconstrained (they cannot precondition then)."""
         key = np.packbits(trusted).tobytes()
-        system = self._trusted_systems.get(key)
-        if system is not None:
+        if key in self._trusted_systems:
             self._trusted_systems.move_to_end(key)
-            return system
+            return self._trusted_systems[key]
         edges = self._edges[trusted]
-        unknowns = np.empty(0, dtype=np.int64)
-        pattern = solver = None
         if not self._components:
             self._components = connected_components(len(self._fixed), self._edges)[0]
+        system = None
         if connected_components(len(self._fixed), edges)[0] == self._components:
-            free_block = np.cumsum(~self._fixed) - 1
-            joined = edges[~self._fixed[edges].any(axis=1)]
-            order = block_order(self._backend, int(np.count_nonzero(~self._fixed)), free_block[joined])
-            lower_only = self._backend == "cholmod"
-            pattern = NormalEquationsPattern.build(edges, self._fixed, self._d, lower_only, block_order=order)
-            solver = make_linear_solver(self._backend, pattern.indptr, pattern.indices, ordered=True)
+            pattern, solver = analysed_pattern(edges, self._fixed, self._d, self._backend)
             # Unknown k of pose p sits at free_index[p] * d + k in either system.
             free = np.flatnonzero(~self._fixed)
-            unknowns = np.empty(pattern.size, dtype=np.int64)
             component = np.arange(self._d)
+            unknowns = np.empty(pattern.size, dtype=np.int64)
             unknowns[(pattern.free_index[free][:, None] * self._d + component).ravel()] = (
                 self.pattern.free_index[free][:, None] * self._d + component
             ).ravel()
-        system = _TrustedSystem(trusted.copy(), pattern, solver, unknowns)
+            system = _TrustedSystem(pattern, solver, unknowns)
         self._trusted_systems[key] = system
         if len(self._trusted_systems) > _CACHED_TRUSTED_SETS:
             self._trusted_systems.popitem(last=False)
