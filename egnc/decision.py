@@ -51,7 +51,7 @@ from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
 from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import NotPositiveDefiniteError
-from egnc.marginals import information_data, innovations
+from egnc.marginals import covariance_solver, innovations
 
 MAX_ROUNDS = 5
 """Refine-and-decide rounds before the classification is taken as it stands."""
@@ -85,7 +85,7 @@ def readmitted(
     candidates = candidates[np.argsort(r[candidates], kind="stable")]
     passed = np.zeros(len(rejected), dtype=bool)
     try:
-        covariance_solve = problem.linear_solver.factorize(information_data(problem, poses))
+        covariance_solve = covariance_solver(problem, poses)
         # Largest residuals first: one batch refutes "all fit" in a graph with gross outliers.
         for stop in range(len(candidates), 0, -READMIT_BATCH):
             batch = candidates[max(0, stop - READMIT_BATCH) : stop]

@@ -32,12 +32,16 @@ _MAX_RHS_VALUES = 2**24
 """Largest `n x columns` right-hand side solved at once (128 MiB of float64)."""
 
 
-def information_data(problem: Problem, poses: np.ndarray) -> np.ndarray:
-    """CSC values `(nnz,)` of the unweighted information `H` of `problem` at `poses` `(N, n, n)`."""
+def covariance_solver(problem: Problem, poses: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """`B -> H^-1 B` for the unweighted information `H` of `problem` at `poses` `(N, n, n)` (one factorization).
+
+    Raises:
+        NotPositiveDefiniteError: `H` cannot be factorized (a degenerate solution).
+    """
     factors = problem.factors
     linearization = factors.linearize(poses)
     data, _ = problem.pattern.assemble(linearization, factors.information, np.ones(len(factors.edges)))
-    return data
+    return problem.linear_solver.factorize(data)
 
 
 def _transposed_jacobians(problem: Problem, rows: np.ndarray, blocks: np.ndarray) -> np.ndarray:
@@ -73,7 +77,7 @@ def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> n
     out = np.zeros((len(rows), d, d))
     if n == 0:
         return out
-    covariance_solve = problem.linear_solver.factorize(information_data(problem, poses))
+    covariance_solve = covariance_solver(problem, poses)
     chunk = max(1, _MAX_RHS_VALUES // (n * d))
     for start in range(0, len(rows), chunk):
         part = rows[start : start + chunk, None]
@@ -98,7 +102,7 @@ def innovations(
         poses: `(N, n, n)` the solution.
         loops: `K` left-out loop closures (rows of the same poses); keep `K` small (the
             covariance is dense).
-        covariance_solve: `problem.linear_solver.factorize(information_data(problem, poses))`
+        covariance_solve: `covariance_solver(problem, poses)`
             if already computed (several batches at one solution share it).
 
     Returns:
@@ -112,7 +116,7 @@ def innovations(
         blocks = np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
         B = _transposed_jacobians(problem, loops.edges, blocks)
         if covariance_solve is None:
-            covariance_solve = problem.linear_solver.factorize(information_data(problem, poses))
+            covariance_solve = covariance_solver(problem, poses)
         S = B.T @ covariance_solve(B)
         S = 0.5 * (S + S.T)
     block = np.arange(len(e))[:, None] * d + np.arange(d)  # (K, d) rows of each loop
