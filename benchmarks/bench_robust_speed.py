@@ -74,8 +74,8 @@ def run_case(case: dict) -> dict:
         "recall": recall,
         "ate": ate(robust.graph.poses[: graph.num_poses], reference.graph.poses, graph.dim),
     }
-    variants = {"direct": (SolverOptions(linear_method="direct"), GncOptions())}
-    variants["before"] = (SolverOptions(linear_method="direct"), GncOptions(every_stage=True))
+    direct = SolverOptions(linear_method="direct")
+    variants = {"direct": (direct, GncOptions()), "before": (direct, GncOptions(every_stage=True))}
     for name in ("direct", "before"):
         if case[name]:
             options, gnc_options = variants[name]

@@ -37,6 +37,8 @@ import scipy.sparse as sp
 from egnc.errors import EgncError, SolverError
 
 LinearSolverName = Literal["auto", "cholmod", "scipy"]
+LINEAR_SOLVERS = ("auto", "cholmod", "scipy")
+"""The `linear_solver` names `resolve_name` accepts (`egnc-solve --linear-solver`)."""
 
 
 class NotPositiveDefiniteError(SolverError):

@@ -31,6 +31,7 @@ from egnc.bench import (
 from egnc.cli.arguments import int_at_least, positive_float
 from egnc.datasets import VARIANTS
 from egnc.errors import EgncError
+from egnc.linear_solvers import LINEAR_SOLVERS
 
 EXAMPLES = f"""examples:
   egnc-bench --datasets csail,intel --percent 10 --seeds 1 --methods egnc,risam,gnc-tls,l2
@@ -91,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--linear-solver",
-        choices=("auto", "cholmod", "scipy"),
+        choices=LINEAR_SOLVERS,
         default="auto",
         help="egnc's sparse backend for every solve (default auto)",
     )

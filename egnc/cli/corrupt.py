@@ -20,6 +20,7 @@ from egnc.api import solve
 from egnc.datasets import VARIANTS, add_false_loops, write_labels
 from egnc.errors import EgncError
 from egnc.io import read_g2o, write_g2o
+from egnc.linear_solvers import LINEAR_SOLVERS
 
 EXAMPLES = """examples:
   egnc-corrupt datasets/grid2d.g2o --percent 30 --seed 1 -o grid2d_30.g2o
@@ -62,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--linear-solver",
-        choices=("auto", "cholmod", "scipy"),
+        choices=LINEAR_SOLVERS,
         default="scipy",
         help="backend of the reference solve (default scipy, so the files do not depend on optional extras)",
     )

@@ -30,6 +30,7 @@ from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
+from egnc.linear_solvers import LINEAR_SOLVERS
 from egnc.step_solver import LINEAR_METHODS
 
 EXIT_NUMERICAL_FAILURE = 3
@@ -95,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--linear-solver",
-        choices=("auto", "cholmod", "scipy"),
+        choices=LINEAR_SOLVERS,
         default="auto",
         help="sparse backend: CHOLMOD (needs egnc[cholmod]) or SciPy's SuperLU; auto picks CHOLMOD if present",
     )
