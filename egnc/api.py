@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from egnc.chordal import chordal_initialization
-from egnc.decision import decide_outliers
+from egnc.decision import decide_outliers, truncated_cost
 from egnc.diagnostics import solve_warnings
 from egnc.errors import EgncError, GraphError
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
@@ -29,6 +29,7 @@ from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, IterationCall
 from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
+from egnc.starts import chordal_decision
 
 __all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
 
@@ -51,10 +52,16 @@ class Result:
         mu: `(E,)` final kernel parameter of each edge (nan for known inliers and for kernels
             without one).
         known_inliers: `(E,)` bool, edges held quadratic (odometry by default).
-        inliers: `(E,)` bool, false for the loop closures rejected as outliers
-            (`r^2 > chi2.ppf(0.95, d)` after the last stage).
+        inliers: `(E,)` bool, false for the loop closures rejected as outliers: for graduated
+            methods the decision of `egnc.decision` (`r^2 > chi2.ppf(q, d)` on the least-squares
+            map of the accepted edges, q = `GncOptions.outlier_quantile`, 0.99 by default); for
+            fixed kernels the same test at their solution; all true for `"l2"`.
         initial_cost: least-squares cost `0.5 sum r^2` at the initial guess.
-        cost: least-squares cost `0.5 sum r^2` at the solution, over all edges.
+        cost: least-squares cost `0.5 sum r^2` at the solution, over all edges (rejected ones too).
+        accepted_cost: the same over the accepted edges only.
+        truncated_cost: `egnc.decision.truncated_cost` at the solution: accepted loops pay
+            `r^2 / 2`, rejected ones `chi2.ppf(q, d) / 2`; the cost by which two decisions are
+            compared.
         iterations: accepted solver steps over all stages.
         stages: per-stage reports; with `GncOptions.refine`, the last one is the least-squares
             refinement on the accepted edges (its `mu` statistics are nan).
@@ -67,6 +74,9 @@ class Result:
             decision (the robust optimum; equal to `residual_norms` for single-stage methods).
             With `residual_norms` it explains a rejection: a loop far off at both is false.
         init: the initial guess used (`INITIALIZATIONS`).
+        start: where the decision that was kept started: `"guess"` (the GNC solve from `init`)
+            or `"chordal"` (the chordal initialization, kept for its lower truncated cost;
+            `GncOptions.chordal_start`).
         warnings: one sentence per thing the user should check before trusting the result
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
     """
@@ -88,8 +98,11 @@ class Result:
     time_s: float
     timings: dict[str, float]
     robust_residual_norms: np.ndarray
+    accepted_cost: float
+    truncated_cost: float
     warnings: tuple[str, ...] = ()
     init: str = "file"
+    start: str = "guess"
 
     def __repr__(self) -> str:
         loops = int(np.count_nonzero(~self.known_inliers))
@@ -203,16 +216,36 @@ def solve(
     status, message = outcome.status, outcome.message
     robust_r = factors.whitened_norms(factors.residuals(poses))
     decide = refine and status != NUMERICAL_FAILURE  # nothing to decide on a failed solve
+    start, settled = "guess", True
     if decide:
-        poses, inliers, refinements = decide_outliers(
+        decision = decide_outliers(
             graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration
         )
-        stages += refinements
-        if refinements:
-            status, message = refinements[-1].status, STATUS_MESSAGES[refinements[-1].status]
+        stages += decision.reports
+        if gnc_options.chordal_start:
+            better, reports = chordal_decision(
+                graph, robust, factors, decision, options, gnc_options, backend, on_stage, on_iteration
+            )
+            stages += reports
+            if better is not None:
+                costs = [
+                    _truncated_cost(factors, kept.poses, robust, graph.tangent_dim, gnc_options)
+                    for kept in (decision, better)
+                ]
+                decision, start = better, "chordal"
+        poses, inliers, settled = decision.poses, decision.inliers, decision.settled
+        if decision.reports:
+            status, message = decision.reports[-1].status, STATUS_MESSAGES[decision.reports[-1].status]
+        if start == "chordal":
+            message += (
+                f"; decision from the chordal initialization (truncated cost {costs[1]:.6g}, against"
+                f" {costs[0]:.6g} from the initial guess)"
+            )
     r = factors.whitened_norms(factors.residuals(poses))
     if not decide:
         inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
+    if method == "l2":  # plain least squares: nothing is rejected
+        inliers = np.ones(graph.num_edges, dtype=bool)
     result_poses = from_matrices(graph.dim, poses)
     initial_fits = classify_inliers(initial_r, robust, graph.tangent_dim, gnc_options)
     return Result(
@@ -226,6 +259,8 @@ def solve(
         inliers=inliers,
         initial_cost=float(0.5 * np.sum(initial_r**2)),
         cost=float(0.5 * np.sum(r**2)),
+        accepted_cost=float(0.5 * np.sum(r[inliers] ** 2)),
+        truncated_cost=truncated_cost(r, robust, graph.tangent_dim, gnc_options.outlier_quantile),
         iterations=sum(stage.iterations for stage in stages),
         stages=stages,
         status=status,
@@ -233,9 +268,19 @@ def solve(
         time_s=time.perf_counter() - started,
         timings=outcome.timings,
         robust_residual_norms=robust_r,
-        warnings=solve_warnings(graph, stages, robust, inliers, initial_r, r, initial_fits, result_poses),
+        warnings=solve_warnings(
+            graph, stages, robust, inliers, initial_r, r, initial_fits, result_poses, settled=settled
+        ),
         init=init,
+        start=start,
     )
+
+
+def _truncated_cost(
+    factors: BetweenFactors, poses: np.ndarray, robust: np.ndarray, d: int, options: GncOptions
+) -> float:
+    """`egnc.decision.truncated_cost` at `(N, n, n)` poses."""
+    return truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, options.outlier_quantile)
 
 
 def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = None) -> np.ndarray:

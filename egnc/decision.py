@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -164,6 +165,42 @@ def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> n
     return admitted
 
 
+@dataclass(frozen=True, eq=False)
+class Decision:
+    """Outcome of `decide_outliers`.
+
+    Attributes:
+        poses: `(N, n, n)` least-squares poses of the accepted edges (the input poses when no
+            round ran).
+        inliers: `(E,)` bool, the accepted edges.
+        reports: one `StageReport` per round.
+        settled: whether the last round left the classification unchanged (false when the
+            rounds ran out, a round hit its iteration limit, or no round could run).
+    """
+
+    poses: np.ndarray
+    inliers: np.ndarray
+    reports: tuple[StageReport, ...]
+    settled: bool
+
+
+def truncated_cost(r: np.ndarray, robust: np.ndarray, d: int, quantile: float) -> float:
+    """Truncated least-squares cost `0.5 (sum_known r^2 + sum_loops min(r^2, chi2.ppf(q, d)))`.
+
+    The cost a classification pays under the outlier test: an accepted loop its squared residual,
+    a rejected one the threshold. Two decisions on the same graph are compared by it (the lower
+    explains the measurements better); it depends on the poses only.
+
+    Args:
+        r: `(E,)` whitened residual norms.
+        robust: `(E,)` bool, the loop closures (truncated); the other edges are quadratic.
+        d: residual dimension.
+        quantile: `q` of the outlier test (`GncOptions.outlier_quantile`).
+    """
+    r2 = r * r
+    return 0.5 * float(np.sum(r2[~robust]) + np.sum(np.minimum(r2[robust], chi2_quantile(quantile, d))))
+
+
 def decide_outliers(
     graph: PoseGraph,
     poses: np.ndarray,
@@ -174,27 +211,30 @@ def decide_outliers(
     factors: BetweenFactors,
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
-) -> tuple[np.ndarray, np.ndarray, tuple[StageReport, ...]]:
-    """Classify at the GNC solution, then refine on the inliers and re-decide until it holds.
+    inliers: np.ndarray | None = None,
+) -> Decision:
+    """Refine on the accepted edges and re-decide until the classification holds.
 
     Args:
         graph: the pose graph.
-        poses: `(N, n, n)` the last GNC stage's solution.
+        poses: `(N, n, n)` starting poses (the last GNC stage's solution).
         robust: `(E,)` bool, the loop closures that may be rejected.
         solver_options: options of each least-squares refinement.
         gnc_options: `outlier_quantile` and `readmit`.
         linear_solver: resolved backend name.
         factors: the graph's factors, built once per solve.
         on_stage, on_iteration: progress callbacks; each round is reported as a stage.
+        inliers: `(E,)` bool, the first classification; None classifies at `poses`.
 
     Returns:
-        `(poses, inliers, reports)`: refined `(N, n, n)` poses, `(E,)` inlier flags consistent
-        with them (unless `MAX_ROUNDS` was hit), and one `StageReport` per round. No round runs
-        when the accepted edges would split the graph into more pieces than all edges do.
+        The `Decision`. No round runs when the accepted edges would split the graph into more
+        pieces than all edges do.
     """
     d = graph.tangent_dim
-    inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
+    if inliers is None:
+        inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
     reports: list[StageReport] = []
+    settled = False
     components = connected_components(graph.num_poses, graph.edges)[0]  # isolated vertices count too
     for _ in range(MAX_ROUNDS):
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
@@ -219,11 +259,13 @@ def decide_outliers(
                 refined.status,
                 int(inliers.sum()),
                 refined.linear.cg_iterations,
+                kind="decision",
             )
         )
         if on_stage is not None:
             on_stage(reports[-1])
         if np.array_equal(decided, inliers) or refined.status in (0, NUMERICAL_FAILURE):  # settled, or stuck
+            settled = refined.status not in (0, NUMERICAL_FAILURE)
             break
         inliers = decided
-    return poses, inliers, tuple(reports)
+    return Decision(poses=poses, inliers=inliers, reports=tuple(reports), settled=settled)

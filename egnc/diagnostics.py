@@ -33,6 +33,8 @@ def solve_warnings(
     final_r: np.ndarray,
     initial_fits: np.ndarray,
     result_poses: np.ndarray,
+    *,
+    settled: bool = True,
 ) -> tuple[str, ...]:
     """The warnings of one solve, in the order the checks run.
 
@@ -44,13 +46,21 @@ def solve_warnings(
         initial_r, final_r: `(E,)` whitened residual norms at the initial guess and the result.
         initial_fits: `(E,)` bool, edges that pass the outlier test at the initial guess.
         result_poses: `(N, P)` optimized poses in the graph's parametrization.
+        settled: whether the outlier decision reached a classification its own map confirms
+            (`egnc.decision.Decision.settled`).
     """
     warnings = [
         f"stage {k} stopped at its iteration limit ({stage.iterations} iterations): the result may not"
-        " have converged (raise --max-iters; from a far-off guess, try --init chordal)"
+        " have converged (raise --max-iters)"
         for k, stage in enumerate(stages, start=1)
-        if stage.status == 0
+        if stage.status == 0 and stage.kind != "probe"
     ]
+    if not settled:
+        warnings.append(
+            "the outlier decision did not settle: its last least-squares map still disagrees with the"
+            " classification (rounds ran out, or a round hit its iteration limit); treat the rejected set"
+            " as provisional"
+        )
     num_loops = int(np.count_nonzero(robust))
     num_rejected = int(np.count_nonzero(robust & ~inliers))
     if num_rejected > 0.5 * num_loops:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -75,6 +76,10 @@ class GncOptions:
             only through the next stage's loss, and egnc's and riSAM's last stage puts every
             loop at `mu = 1` whatever came before: only that stage is solved (the same poses
             and decision as solving every stage, bit for bit; docs/method.md).
+        chordal_start: with `refine`, decide a second time from the chordal initialization
+            (which does not read the initial guess) and keep the decision of lower truncated
+            least-squares cost (`egnc.starts`): from a drifted guess the GNC stage can settle in a
+            wrong basin that the decision rounds confirm.
         every_stage: solve every stage of the schedule even when, under restarts, only the last
             one decides the result: to watch the graduation stage by stage (same result, more time).
         stage_rel_cost_tol: graduated methods: each GNC stage stops when its relative cost
@@ -92,6 +97,7 @@ class GncOptions:
     readmit: bool = True
     readmit_quantile: float = 0.9999
     warm_start: bool = False
+    chordal_start: bool = True
     every_stage: bool = False
     stage_rel_cost_tol: float = 1e-6
 
@@ -108,6 +114,9 @@ class GncOptions:
             raise EgncError(f"max_stages must be at least 1, got {self.max_stages}")
 
 
+StageKind = Literal["gnc", "decision", "probe"]
+
+
 @dataclass(frozen=True, eq=False)
 class StageReport:
     """Summary of one stage.
@@ -121,6 +130,9 @@ class StageReport:
         active_edges: edges in the stage's solve (the accepted ones in a refinement round).
         cg_iterations: conjugate-gradient iterations of the stage's steps (`egnc.step_solver`;
             0 when every step was solved directly).
+        kind: `"gnc"` (a graduated stage), `"decision"` (a least-squares round of
+            `egnc.decision`) or `"probe"` (the few iterations `egnc.starts` gives the chordal
+            start; it stops at its iteration limit by design).
     """
 
     mu_min: float
@@ -132,6 +144,7 @@ class StageReport:
     status: int
     active_edges: int
     cg_iterations: int = 0
+    kind: StageKind = "gnc"
 
 
 StageCallback = Callable[[StageReport], None]

@@ -28,7 +28,9 @@ PROGRESS_LINE = re.compile(
     r"^stage \d+: (mu \S+|least squares), \d+ iterations( \(iteration limit\))?, cost \S+, \d+ edges,"
     r" [\d.]+ s \(elapsed [\d.]+ s\)$"
 )
-STAGE_KEYS = {"mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges", "cg_iterations"}
+STAGE_KEYS = {
+    "mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges", "cg_iterations", "kind"
+}
 
 
 def egnc_solve(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:

@@ -21,8 +21,9 @@ from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
 from egnc.marginals import innovations, pose_covariances
 
-OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False)
-"""The decision before re-admission: the Geman-McClure classification at chi2.ppf(0.95), re-checked by r^2."""
+OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, chordal_start=False)
+"""The decision before re-admission and the chordal start: the Geman-McClure classification at
+chi2.ppf(0.95), re-checked by r^2."""
 
 
 def test_drifted_guess_with_few_loops_keeps_every_loop():
@@ -173,9 +174,16 @@ def test_a_corrupted_odometry_edge_is_reported_not_hidden():
     measurements = graph.measurements.copy()
     k = np.flatnonzero(graph.is_odometry)[40]
     measurements[k, 0] += 1000.0  # a wheel-odometry glitch of a kilometre
-    result = solve(dataclasses.replace(graph, measurements=measurements))
+    corrupted = dataclasses.replace(graph, measurements=measurements)
+    result = solve(corrupted, gnc_options=GncOptions(chordal_start=False))
     assert any("known-inlier edges (odometry) disagree" in warning for warning in result.warnings)
     assert len(result.stages) <= 3 + MAX_ROUNDS
+    # From the chordal start the map splits at the glitch and the loops across it go: a lower
+    # truncated cost with the odometry trusted, but never a silent one.
+    result = solve(corrupted)
+    assert result.start == "chordal"
+    assert any("more than half" in warning for warning in result.warnings)
+    assert len(result.stages) <= 3 + 1 + 2 * MAX_ROUNDS
 
 
 def test_a_weak_map_does_not_absorb_gross_outliers(dataset_path):

@@ -39,7 +39,7 @@ def test_least_squares_is_corrupted_by_false_loops(corrupted_world):
     result = solve(corrupted.graph, "l2")
     error = np.abs(result.graph.poses[:, :dim] - clean.graph.poses[:, :dim]).max()
     assert error > 0.1
-    assert np.count_nonzero(~result.inliers & ~corrupted.is_outlier) > 10  # true loops torn apart
+    assert result.inliers.all()  # plain least squares rejects nothing
 
 
 @pytest.mark.parametrize("d", [3, 6])
@@ -65,7 +65,8 @@ def test_result_reports_per_edge_diagnostics(corrupted_world):
     assert np.all((result.weights >= 0) & (result.weights <= 1))
     np.testing.assert_array_equal(result.rejected_edges, np.flatnonzero(corrupted.is_outlier))
     # Restarted stages: only the last (mu = 1) is solved, then the least-squares refinement.
-    assert len(result.stages) == 2
+    # the GNC stage, one decision round, and the chordal start's probe (its classification differs)
+    assert [stage.kind for stage in result.stages][:2] == ["gnc", "decision"] and result.start == "guess"
     assert result.stages[0].mu_min == 1.0 and np.isnan(result.stages[1].mu_min)
 
 

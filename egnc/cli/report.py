@@ -19,7 +19,7 @@ def accepted_cost(result: Result) -> float:
 
 def iteration_limited_stages(result: Result) -> list[int]:
     """1-based numbers of the stages that stopped at their iteration limit (status 0)."""
-    return [k for k, stage in enumerate(result.stages, start=1) if stage.status == 0]
+    return [k for k, stage in enumerate(result.stages, start=1) if stage.status == 0 and stage.kind != "probe"]
 
 
 def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
@@ -69,6 +69,7 @@ def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
                 "status": stage.status,
                 "active_edges": stage.active_edges,
                 "cg_iterations": stage.cg_iterations,
+                "kind": stage.kind,
             }
             for stage in result.stages
         ],
