@@ -36,9 +36,11 @@ def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
         "init": result.init,
         "linear_solver": result.linear_solver,
         "time_s": result.time_s,
-        "initial_cost": result.initial_cost,
-        "final_cost": result.cost,
-        "accepted_cost": accepted_cost(result),
+        # Named by the edges they sum over: `Result.cost` includes the rejected loops, the
+        # summary's figure leaves them out, and the two differ by far on a graph with outliers.
+        "initial_cost_all_edges": result.initial_cost,
+        "final_cost_all_edges": result.cost,
+        "final_cost_accepted_edges": accepted_cost(result),
         "iterations": result.iterations,
         "status": result.status,
         "message": result.message,
@@ -113,7 +115,8 @@ def summary(result: Result, written: list[Path]) -> str:
         f"poses {graph.num_poses}, edges {graph.num_edges}, loop closures {int(graph.is_loop_closure.sum())}"
         f" ({graph.dim}D)",
         f"method {result.method}, linear solver {result.linear_solver}",
-        f"least-squares cost over the {int(result.inliers.sum())} accepted edges: {accepted_cost(result):.10g}",
+        f"least-squares cost {accepted_cost(result):.10g} over the {int(result.inliers.sum())} accepted edges"
+        f" ({result.cost:.10g} over all {graph.num_edges} edges, rejected ones included)",
         f"{len(result.stages)} stages, {result.iterations} iterations ({stopped})",
         f"rejected {len(result.rejected_edges)} of {int((~result.known_inliers).sum())} loop closures"
         f" (candidates: edges not known inliers)",
