@@ -52,7 +52,7 @@ class Result:
             without one).
         known_inliers: `(E,)` bool, edges held quadratic (odometry by default).
         inliers: `(E,)` bool, false for the loop closures rejected as outliers
-            (`r^2 > chi2.ppf(0.95, d)` after the last stage).
+            (`r^2 > chi2.ppf(GncOptions.outlier_quantile, d)`, 0.99 by default, after the last stage).
         initial_cost: least-squares cost `0.5 sum r^2` at the initial guess.
         cost: least-squares cost `0.5 sum r^2` at the solution, over all edges.
         iterations: accepted solver steps over all stages.

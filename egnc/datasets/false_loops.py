@@ -5,8 +5,9 @@ closures are added, so that p % of all loop closures are false (DESIGN.md sectio
 two poses a, b with `|a - b| >= 2` (pose rows, so it is never mistaken for odometry), measures
 the identity, and has the fixed covariance `diag(0.015, 0.01, 0.001)` in 2D or `0.01 I_6` in 3D.
 A candidate is kept only if it really is an outlier: its squared whitened error at the
-outlier-free optimum `reference_poses` exceeds `chi2.ppf(0.95, d)`, the same rule that classifies
-outliers after a solve (DESIGN.md section 4). riSAM's generator compares the unsquared distance
+outlier-free optimum `reference_poses` exceeds `chi2.ppf(0.95, d)`, the EGNC paper's outlier rule
+(DESIGN.md section 4; egnc's own decision after a solve uses the higher threshold
+`chi2.ppf(GncOptions.outlier_quantile, d)`, 0.99 by default). riSAM's generator compares the unsquared distance
 with its quantile instead, which only keeps larger errors.
 A candidate is also redrawn when its two poses already share an edge, of the graph or an earlier
 false loop (in either direction): the corrupted graph has no duplicate edge
