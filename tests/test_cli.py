@@ -18,7 +18,7 @@ from egnc.datasets import read_labels
 DATASETS = Path(__file__).parents[1] / "datasets"
 GRID2D = DATASETS / "grid2d.g2o"
 
-# The report fields the README documents; the CLI may add more, never fewer.
+# The report fields docs/cli.md documents; the CLI may add more, never fewer.
 REPORT_KEYS = {
     "method", "linear_solver", "time_s", "initial_cost_all_edges", "final_cost_all_edges",
     "final_cost_accepted_edges", "iterations", "status",

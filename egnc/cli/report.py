@@ -1,4 +1,4 @@
-"""What `egnc-solve` tells the user: the JSON report (fields documented in the README) and the summary."""
+"""What `egnc-solve` tells the user: the JSON report (fields documented in docs/cli.md) and the summary."""
 
 from __future__ import annotations
 

@@ -34,7 +34,7 @@ from egnc.linear_solvers import LINEAR_SOLVERS
 from egnc.step_solver import LINEAR_METHODS
 
 EXIT_NUMERICAL_FAILURE = 3
-"""Exit code when the solve fails numerically (documented in the README)."""
+"""Exit code when the solve fails numerically (documented in docs/cli.md)."""
 
 """`Result.status` of a solve that produced non-finite numbers (`egnc.least_squares`)."""
 
