@@ -45,7 +45,8 @@ Measured with the default method, SciPy's SuperLU against CHOLMOD (2 shared core
 times are high): 3D grid worlds of 2000 / 3500 / 5000 poses 0.8 / 3.1 / 6.1 s against
 0.2 / 0.4 / 0.9 s; sphere2500 1.1 against 0.5 s; SE-Sync's torus3D (5000 poses) 92 against 8 s;
 cubicle (5750) 215 against 34 s. In 2D the fill-in is smaller: city10000 2.9 against 0.9 s, a
-30000-pose grid world 6.6 against 2.3 s.
+30000-pose grid world 6.6 against 2.3 s; but a 100 000-pose one with 10 % false loops took 129 s
+on CHOLMOD and had not finished after 11 minutes on SuperLU (BENCHMARKS.md, "Large graphs").
 """
 
 EXAMPLES = """examples:
