@@ -1,4 +1,4 @@
-"""Regenerate the pictures in `docs/` that the README shows: `python docs/make_figures.py`.
+"""Regenerate the pictures in `docs/` that the README and docs/overview.md show: `python docs/make_figures.py`.
 
 - `trajectory_grid2d.png`: egnc on `datasets/grid2d_outliers.g2o`: initial guess, result,
   accepted and rejected loop closures (the same figure as `egnc-solve ... --plot`).

@@ -4,12 +4,11 @@ Public API: `solve` a pose graph (or a g2o file) into a `Result`; `read_g2o` / `
 `SolverOptions` and `GncOptions`; the `PoseGraph` container; the `EgncError` hierarchy.
 """
 
-import sys
+# Underscored: the package namespace holds only the public API (`__all__`), not its helpers.
+import sys as _sys
 
-if sys.version_info < (3, 10):  # noqa: UP036 - pip checks requires-python, a source tree does not
-    raise ImportError(f"egnc needs Python 3.10 or newer; this is Python {sys.version.split()[0]}")
-
-from importlib.metadata import PackageNotFoundError, version
+if _sys.version_info < (3, 10):  # noqa: UP036 - pip checks requires-python, a source tree does not
+    raise ImportError(f"egnc needs Python 3.10 or newer; this is Python {_sys.version.split()[0]}")
 
 from egnc.api import Result, StageReport, marginal_covariances, solve
 from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError, NumericalError, SolverError
@@ -18,11 +17,18 @@ from egnc.graph import PoseGraph
 from egnc.io import read_g2o, write_g2o
 from egnc.least_squares import SolverOptions
 
-try:
-    # pyproject.toml is the one place the version is written; installs record it in the metadata.
-    __version__ = version("egnc")
-except PackageNotFoundError:  # imported from a source tree that was never installed
-    __version__ = "0+unknown"
+
+def _installed_version() -> str:
+    """The version pip recorded for egnc; pyproject.toml is the one place it is written."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("egnc")
+    except PackageNotFoundError:  # imported from a source tree that was never installed
+        return "0+unknown"
+
+
+__version__ = _installed_version()
 
 __all__ = [
     "EgncError",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -175,6 +176,9 @@ def test_false_loops_follow_the_protocol(world, variant, percent):
     squared = squared_errors_at(corrupted.graph, reference)[corrupted.is_outlier]
     assert np.all(squared > chi2.ppf(0.95, graph.tangent_dim))
 
+    # No false loop repeats the pair of another edge, true or false.
+    assert not corrupted.graph.is_duplicate.any()
+
     # Interleaved in time order, not appended where their position would give them away.
     assert np.all(np.diff(corrupted.graph.edges.max(axis=1)) >= 0)
 
@@ -200,6 +204,20 @@ def test_false_loops_come_in_consecutive_groups(world, variant):
     assert sum(grouped) >= in_groups - cut_to_one
     if variant == "mixed":
         assert sum(grouped) < count
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_false_loops_never_duplicate_an_edge_even_when_pairs_are_scarce(dim, variant):
+    # 40 poses, 70 % false: before the rule, seed 3 drew a repeated pair in both dimensions.
+    small = grid_world(dim, 40, seed=7)
+    assert not small.graph.is_duplicate.any()
+    for seed in range(5):
+        corrupted = add_false_loops(
+            small.graph, 70, seed=seed, reference_poses=small.ground_truth, variant=variant, close_radius=5.0
+        )
+        assert corrupted.is_outlier.sum() == false_loop_count(int(small.graph.is_loop_closure.sum()), 70)
+        assert not corrupted.graph.is_duplicate.any(), (variant, seed)
 
 
 def test_false_loops_are_reproducible_and_seed_dependent(world):
@@ -301,3 +319,24 @@ def test_shipped_labels_describe_the_shipped_graphs():
         np.testing.assert_array_equal(corrupted.edges[~is_outlier], clean.edges)
         num_loops = int(clean.is_loop_closure.sum())
         assert is_outlier.sum() == false_loop_count(num_loops, meta["percent"])
+
+
+@pytest.mark.parametrize("name", ["grid2d", "grid3d", "grid2d_outliers", "grid3d_outliers"])
+def test_shipped_graphs_read_without_any_warning(name):
+    # The README's first command solves one: a warning about the project's own data reads as a fault.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        graph = read_g2o(SHIPPED / f"{name}.g2o")
+    assert not graph.is_duplicate.any()  # egnc-solve would warn about duplicate edges
+
+
+def test_readme_first_command_prints_no_warning(tmp_path):
+    command = ["-m", "egnc.cli.solve", str(SHIPPED / "grid2d_outliers.g2o"), "-o", str(tmp_path / "solved.g2o")]
+    run = subprocess.run(
+        [sys.executable, *command],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    assert [line for line in run.stderr.splitlines() if line.startswith("warning")] == []

@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import types
 from pathlib import Path
 
 import pytest
@@ -33,6 +34,19 @@ def test_public_api_is_reexported():
     assert {"solve", "Result", "StageReport", "SolverOptions", "PoseGraph", "read_g2o", "write_g2o",
             "EgncError", "G2oFormatError", "GraphError", "SolverError", "__version__"} <= set(egnc.__all__)  # fmt: skip
     assert issubclass(egnc.G2oFormatError, egnc.EgncError)
+
+
+def test_namespace_holds_only_the_public_api():
+    """`dir(egnc)` shows `__all__` and the package's own submodules, no helper (`sys`, `version`, ...)."""
+    public = {
+        name
+        for name in dir(egnc)
+        if not name.startswith("_")
+        and not (isinstance(getattr(egnc, name), types.ModuleType) and getattr(egnc, name).__name__.startswith("egnc."))
+    }
+    assert public | {"__version__"} == set(egnc.__all__)
+    for helper in ("sys", "version", "PackageNotFoundError"):
+        assert not hasattr(egnc, helper), helper
 
 
 def test_version_matches_pyproject():

@@ -4,7 +4,8 @@ Every run is scored by one yardstick. Outliers are the positive class of precisi
 (`egnc.metrics.precision_recall`), and a run is a success when both are exactly 1
 (`egnc.metrics.success`). ATE and RPE are measured against the case's outlier-free reference
 (`egnc.metrics`). GTSAM's outliers are decided by egnc's own rule on its final residuals (a loop
-closure is an outlier when `r^2 > chi2.ppf(0.95, d)`); GTSAM's per-edge weights are not used.
+closure is an outlier when `r^2 > chi2.ppf(q, d)`, `q` = `GncOptions.outlier_quantile`, 0.99); GTSAM's
+per-edge weights are not used.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""What `egnc-solve` tells the user: the JSON report (fields documented in the README) and the summary."""
+"""What `egnc-solve` tells the user: the JSON report (fields documented in docs/cli.md) and the summary."""
 
 from __future__ import annotations
 
@@ -10,11 +10,6 @@ import numpy as np
 
 from egnc.api import Result
 from egnc.connectivity import describe_ids
-
-
-def accepted_cost(result: Result) -> float:
-    """Least-squares cost `0.5 sum r^2` at the solution over the accepted edges (the rejected ones left out)."""
-    return 0.5 * float(np.sum(result.residual_norms[result.inliers] ** 2))
 
 
 def iteration_limited_stages(result: Result) -> list[int]:
@@ -36,9 +31,13 @@ def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
         "init": result.init,
         "linear_solver": result.linear_solver,
         "time_s": result.time_s,
-        "initial_cost": result.initial_cost,
-        "final_cost": result.cost,
-        "accepted_cost": accepted_cost(result),
+        # Named by the edges they sum over: `Result.cost` includes the rejected loops, the
+        # summary's figure leaves them out, and the two differ by far on a graph with outliers.
+        "initial_cost_all_edges": result.initial_cost,
+        "final_cost_all_edges": result.cost,
+        "final_cost_accepted_edges": result.accepted_cost,
+        "truncated_cost": result.truncated_cost,
+        "start": result.start,
         "iterations": result.iterations,
         "status": result.status,
         "message": result.message,
@@ -110,11 +109,14 @@ def summary(result: Result, written: list[Path]) -> str:
         stopped = f"iteration limit reached in {len(limited)} stages: {describe_ids(np.array(limited))}"
     else:
         stopped = result.message
+    if result.warnings:
+        stopped += f"; warnings: {len(result.warnings)}, read them before trusting the result"
     lines = [
         f"poses {graph.num_poses}, edges {graph.num_edges}, loop closures {int(graph.is_loop_closure.sum())}"
         f" ({graph.dim}D)",
         f"method {result.method}, linear solver {result.linear_solver}",
-        f"least-squares cost over the {int(result.inliers.sum())} accepted edges: {accepted_cost(result):.10g}",
+        f"least-squares cost {result.accepted_cost:.10g} over the {int(result.inliers.sum())} accepted edges"
+        f" ({result.cost:.10g} over all {graph.num_edges} edges, rejected ones included)",
         f"{len(result.stages)} stages, {result.iterations} iterations ({stopped})",
         f"rejected {len(result.rejected_edges)} of {int((~result.known_inliers).sum())} loop closures"
         f" (candidates: edges not known inliers)",

@@ -30,13 +30,24 @@ from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
-from egnc.linear_solvers import LINEAR_SOLVERS
+from egnc.linear_solvers import LINEAR_SOLVERS, cholmod_available
 from egnc.step_solver import LINEAR_METHODS
 
 EXIT_NUMERICAL_FAILURE = 3
-"""Exit code when the solve fails numerically (documented in the README)."""
+"""Exit code when the solve fails numerically (documented in docs/cli.md)."""
 
 """`Result.status` of a solve that produced non-finite numbers (`egnc.least_squares`)."""
+
+CHOLMOD_HINT_MIN_POSES = {2: 30_000, 3: 3_000}
+"""Graph sizes (poses, by dimension) from which a SciPy-only `egnc-solve` names the `cholmod` extra.
+
+Measured with the default method, SciPy's SuperLU against CHOLMOD (2 shared cores, so absolute
+times are high): 3D grid worlds of 2000 / 3500 / 5000 poses 0.8 / 3.1 / 6.1 s against
+0.2 / 0.4 / 0.9 s; sphere2500 1.1 against 0.5 s; SE-Sync's torus3D (5000 poses) 92 against 8 s;
+cubicle (5750) 215 against 34 s. In 2D the fill-in is smaller: city10000 2.9 against 0.9 s, a
+30000-pose grid world 6.6 against 2.3 s; but a 100 000-pose one with 10 % false loops took 129 s
+on CHOLMOD and had not finished after 11 minutes on SuperLU (BENCHMARKS.md, "Large graphs").
+"""
 
 EXAMPLES = """examples:
   egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o
@@ -203,6 +214,9 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         known_inliers = _known_inliers(args.known_inliers, graph)
         read_notes = _warning_notes(caught) + _duplicate_note(graph, args.input)
         _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
+        hint = None if args.quiet else cholmod_hint(graph, args.linear_solver, cholmod_available())
+        if hint is not None:
+            print(f"hint: {hint}", file=sys.stderr, flush=True)
         read_count = len(caught)
         progress = None if args.quiet else Progress(sys.stderr)
         result = solve(
@@ -240,6 +254,23 @@ def _duplicate_note(graph: PoseGraph, input_path: Path) -> list[str]:
         f"{input_path}: {duplicates} duplicate edges (the same two vertices as an earlier edge, in either "
         "direction); all are kept and solved"
     ]
+
+
+def cholmod_hint(graph: PoseGraph, linear_solver: str, cholmod_installed: bool) -> str | None:
+    """The line suggesting the `cholmod` extra, for a large graph left to SciPy by `auto`; else None.
+
+    Args:
+        graph: the graph about to be solved.
+        linear_solver: `--linear-solver`; asking for `scipy` by name gets no hint.
+        cholmod_installed: whether scikit-sparse can be imported.
+    """
+    if linear_solver != "auto" or cholmod_installed or graph.num_poses < CHOLMOD_HINT_MIN_POSES[graph.dim]:
+        return None
+    return (
+        f"scikit-sparse is not installed, so this {graph.num_poses}-pose {graph.dim}D graph is solved with SciPy's"
+        " SuperLU; CHOLMOD is several times faster at this size: apt-get install libsuitesparse-dev, then"
+        ' pip install "egnc[cholmod]"'
+    )
 
 
 def _known_inliers(choice: str, graph: PoseGraph) -> str | np.ndarray:

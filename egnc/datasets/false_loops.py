@@ -5,9 +5,15 @@ closures are added, so that p % of all loop closures are false (DESIGN.md sectio
 two poses a, b with `|a - b| >= 2` (pose rows, so it is never mistaken for odometry), measures
 the identity, and has the fixed covariance `diag(0.015, 0.01, 0.001)` in 2D or `0.01 I_6` in 3D.
 A candidate is kept only if it really is an outlier: its squared whitened error at the
-outlier-free optimum `reference_poses` exceeds `chi2.ppf(0.95, d)`, the same rule that classifies
-outliers after a solve (DESIGN.md section 4). riSAM's generator compares the unsquared distance
+outlier-free optimum `reference_poses` exceeds `chi2.ppf(0.95, d)`, the EGNC paper's outlier rule
+(DESIGN.md section 4; egnc's own decision after a solve uses the higher threshold
+`chi2.ppf(GncOptions.outlier_quantile, d)`, 0.99 by default). riSAM's generator compares the unsquared distance
 with its quantile instead, which only keeps larger errors.
+A candidate is also redrawn when its two poses already share an edge, of the graph or an earlier
+false loop (in either direction): the corrupted graph has no duplicate edge
+(`PoseGraph.is_duplicate`) that the input did not have, so a reader warns about nothing new.
+This only removes candidates from the stream of draws, so a seed whose draws held no such pair
+gives the same false loops as before the rule was added.
 
 Variants (riSAM's options):
 - "random": independent pairs.
@@ -141,6 +147,7 @@ def add_false_loops(
         dim=graph.dim,
         forward=bool(2 * np.count_nonzero(loops[:, 0] < loops[:, 1]) >= len(loops)),
         close_radius=close_radius if variant == "close" else None,
+        edges=graph.edges,
     )
     false_edges = np.concatenate([sampler.draw(n, size) for n, size in segments])
     return _merge(graph, false_edges)
@@ -150,7 +157,13 @@ class _Sampler:
     """Draws false loops in batches from one generator and keeps those that pass every test."""
 
     def __init__(
-        self, rng: np.random.Generator, T_world: np.ndarray, dim: int, forward: bool, close_radius: float | None
+        self,
+        rng: np.random.Generator,
+        T_world: np.ndarray,
+        dim: int,
+        forward: bool,
+        close_radius: float | None,
+        edges: np.ndarray,
     ):
         self.rng = rng
         self.T_world = T_world
@@ -159,6 +172,8 @@ class _Sampler:
         self.close_radius = close_radius
         self.information_diagonal = np.diag(_false_loop_information(dim))
         self.threshold = chi2_quantile(ACCEPT_QUANTILE, TANGENT_SIZE[dim])
+        self.taken = {(min(a, b), max(a, b)) for a, b in edges.tolist()}
+        """Unordered pose pairs that already have an edge: the graph's and the false loops kept so far."""
 
     def draw(self, count: int, size: int) -> np.ndarray:
         """Return `(count, 2)` int64 false-loop edges made of groups of `size` consecutive pairs."""
@@ -191,10 +206,28 @@ class _Sampler:
             accept &= np.all(self._is_outlier(members), axis=1)
             if self.close_radius is not None:
                 accept &= np.all(self._distance(members) <= self.close_radius, axis=1)
+            accept[accept] = self._take_new_pairs(members[accept], num_groups - num_kept)
             kept.append(seeds[accept])
             num_kept += int(np.count_nonzero(accept))
         seeds = np.concatenate(kept)[:num_groups]
         return (seeds[:, None, :] + offsets[None, :, None]).reshape(-1, 2)[:count]
+
+    def _take_new_pairs(self, candidates: np.ndarray, wanted: int) -> np.ndarray:
+        """`(C, size, 2)` candidate groups in draw order -> `(C,)` bool: the first `wanted` whose pairs have no edge.
+
+        The pairs of the groups marked true are added to `taken`, so a later candidate (in this
+        batch too) cannot repeat them. A loop over the candidates that passed the other tests only.
+        """
+        new = np.zeros(len(candidates), dtype=bool)
+        for k, group in enumerate(np.sort(candidates, axis=-1).tolist()):
+            if wanted == 0:
+                break
+            pairs = [(a, b) for a, b in group]
+            if self.taken.isdisjoint(pairs):
+                self.taken.update(pairs)
+                new[k] = True
+                wanted -= 1
+        return new
 
     def _is_outlier(self, pairs: np.ndarray) -> np.ndarray:
         """`(..., 2)` pose rows -> `(...)` bool: identity measurement rejected by the chi-square test."""

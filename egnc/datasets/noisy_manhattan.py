@@ -7,16 +7,16 @@ from the ground truth:
 - odometry (consecutive ids): `Z = (X_i^-1 X_j) Exp(n)`, `n ~ N(0, diag(odometry_sigma^2))`;
 - inlier loop closures: the same with `loop_sigma` (zero by default: exact measurements);
 - outliers: a seeded share `outlier_fraction` of the loop closures, chosen uniformly without
-  replacement, measure `(X_i^-1 X_j) Exp(p)` with `p ~ N(0, diag(outlier_sigma^2))`, and a draw
-  is kept only if the loop really is an outlier: its squared whitened error `e^T Omega e`,
-  `e = Log(Z^-1 X_i^-1 X_j)`, exceeds `chi2.ppf(0.95, d)` (the rule that classifies outliers
-  after a solve, DESIGN.md section 4) both at the ground truth and at the outlier-free optimum,
-  the least-squares optimum of the noisy graph without the outliers. Rejected draws are redrawn.
-  The second test matters: odometry noise moves the optimum away from the ground truth, and a
-  draw just above the threshold at the ground truth can fall below it at the optimum (6 of 630
-  on manhattanOlson3500 with seed 1), where even a perfect rejection would then be scored as a
-  miss. The outlier-free optimum does not depend on the outliers' measurements, so it is
-  solved once, before they are drawn.
+  replacement, measure `(X_i^-1 X_j) Exp(p)` with `p ~ N(0, diag(outlier_sigma^2))`, and a draw is
+  kept only if the loop really is an outlier: its squared whitened error `e^T Omega e`,
+  `e = Log(Z^-1 X_i^-1 X_j)`, exceeds `chi2.ppf(0.95, d)` (the EGNC paper's outlier rule, DESIGN.md
+  section 4; egnc's own decision uses `GncOptions.outlier_quantile`, 0.99) both at the ground
+  truth and at the outlier-free optimum, the least-squares optimum of the noisy graph without the
+  outliers. Rejected draws are redrawn. The second test matters: odometry noise moves the optimum
+  away from the ground truth, and a draw just above the threshold at the ground truth can fall
+  below it at the optimum (6 of 630 on manhattanOlson3500 with seed 1), where even a perfect
+  rejection would then be scored as a miss. The outlier-free optimum does not depend on the
+  outliers' measurements, so it is solved once, before they are drawn.
 
 How gross the outliers are decides the experiment. With the default test, part of the
 outliers sit just above the threshold, and 630 of them (30 % of manhattanOlson3500's loop
@@ -151,8 +151,9 @@ def make_noisy_manhattan(
         outlier_sigma: standard deviations of the outlier perturbations, same forms.
         loop_sigma: noise of the inlier loop closures, same forms; zero keeps them exact.
         outlier_min_r2: squared whitened error an outlier must exceed (at the ground truth and
-            at the outlier-free optimum); None means `chi2.ppf(0.95, d)`, the classification
-            threshold. Larger values keep only gross outliers.
+            at the outlier-free optimum); None means `chi2.ppf(0.95, d)`, the paper's
+            classification threshold (egnc decides at 0.99 by default). Larger values keep only
+            gross outliers.
         decimals: round measurements and initial poses to this many decimals; None keeps full
             precision.
 
