@@ -14,16 +14,15 @@ pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 
 1. Classify every loop at the chordal poses (`r^2 <= chi2.ppf(q, d)` accepted).
 2. If that is the guess's decision already, stop: nothing to compare.
-3. Probe: `PROBE_ITERATIONS` least-squares iterations on the accepted edges from the chordal
+3. Probe: unless the chordal poses' truncated cost is more than `PROBE_GATE` times the
+   guess's decision's (a map bent by false loops: 5-100x on the shared files with 10-50 % false
+   loops), give the accepted edges `PROBE_ITERATIONS` least-squares iterations from the chordal
    poses. A consistent set converges in a few (the chordal map of a clean graph is within a few
-   percent of the optimum's cost); a set bent by false loops stays many times above the guess's
-   decision (5-100x on the shared files with 10-50 % false loops). Stop unless the truncated
-   cost is already below the guess's.
+   percent of the optimum's cost). Stop unless the truncated cost is then below the guess's.
 4. Decide from there (`decide_outliers`, starting from that classification); adopt the result
    only if its truncated cost is lower than the guess's decision.
 
-On a graph with false loops and a good guess, this costs one chordal solve and at most
-`PROBE_ITERATIONS` iterations, and changes nothing; on a clean graph with a drifted guess it
+On a graph with false loops and a good guess, this costs one chordal solve and changes nothing; on a clean graph with a drifted guess it
 returns the least-squares optimum with every loop accepted.
 """
 
@@ -44,6 +43,11 @@ from egnc.least_squares import IterationCallback, Problem, SolverOptions, solve_
 PROBE_ITERATIONS = 2
 """Least-squares iterations a chordal classification gets to show a lower truncated cost than
 the guess's decision (the clean drifted files needed at most 1; BENCHMARKS.md)."""
+
+PROBE_GATE = 2.0
+"""The probe runs only when the chordal poses' truncated cost is at most this many times the
+guess's decision's: 1.03 at most on the clean drifted files, 5 to 100 with 10-50 % false loops,
+where the probe would factorize every false loop's fill-in for nothing."""
 
 
 def chordal_decision(
@@ -86,6 +90,8 @@ def chordal_decision(
     if np.array_equal(inliers, to_beat.inliers):
         return None, ()
     target = cost(to_beat.poses)
+    if cost(poses) > PROBE_GATE * target:
+        return None, ()
     problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver, factors.subset(inliers))
     probe_options = replace(solver_options, max_iterations=PROBE_ITERATIONS)
     probe = solve_least_squares(problem, poses, None, probe_options, on_iteration)
