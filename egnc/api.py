@@ -18,6 +18,7 @@ from egnc.gnc import (
     StageCallback,
     StageReport,
     classify_inliers,
+    kept_stages,
     known_inlier_mask,
     run_gnc,
 )
@@ -115,8 +116,8 @@ class Result:
 
     @property
     def converged(self) -> bool:
-        """Whether the last solve and every stage before it stopped on a convergence criterion."""
-        return self.status in (1, 2, 3) and all(stage.status != 0 for stage in self.stages)
+        """Whether the last solve and every stage of the kept start stopped on a convergence criterion."""
+        return self.status in (1, 2, 3) and all(stage.status != 0 for stage in kept_stages(self.stages, self.start))
 
     @property
     def rejected_edges(self) -> np.ndarray:
@@ -216,31 +217,33 @@ def solve(
     status, message = outcome.status, outcome.message
     robust_r = factors.whitened_norms(factors.residuals(poses))
     decide = refine and status != NUMERICAL_FAILURE  # nothing to decide on a failed solve
-    start, settled = "guess", True
+    start, settled, message_note = "guess", True, ""
+    disputed = np.zeros(graph.num_edges, dtype=bool)
     if decide:
-        decision = decide_outliers(
-            graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration
-        )
+        decision = decide_outliers(graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration)
         stages += decision.reports
         if gnc_options.chordal_start:
-            better, reports = chordal_decision(
-                graph, robust, factors, decision, options, gnc_options, backend, on_stage, on_iteration
+            trusted = ~robust | (outcome.weights >= options.trust_weight)
+            other, reports = chordal_decision(
+                graph, robust, factors, decision, trusted, options, gnc_options, backend, on_stage, on_iteration
             )
             stages += reports
-            if better is not None:
-                costs = [
-                    _truncated_cost(factors, kept.poses, robust, graph.tangent_dim, gnc_options)
-                    for kept in (decision, better)
-                ]
-                decision, start = better, "chordal"
+            if other is not None:
+                costs = {
+                    name: _truncated_cost(factors, kept.poses, robust, graph.tangent_dim, gnc_options)
+                    for name, kept in (("guess", decision), ("chordal", other))
+                }
+                if costs["chordal"] < costs["guess"]:
+                    decision, other, start = other, decision, "chordal"
+                    message_note = (
+                        f"; decision from the chordal initialization (truncated cost {costs['chordal']:.6g}, against"
+                        f" {costs['guess']:.6g} from the initial guess)"
+                    )
+                disputed = robust & ~decision.inliers & other.inliers
         poses, inliers, settled = decision.poses, decision.inliers, decision.settled
         if decision.reports:
             status, message = decision.reports[-1].status, STATUS_MESSAGES[decision.reports[-1].status]
-        if start == "chordal":
-            message += (
-                f"; decision from the chordal initialization (truncated cost {costs[1]:.6g}, against"
-                f" {costs[0]:.6g} from the initial guess)"
-            )
+        message += message_note
     r = factors.whitened_norms(factors.residuals(poses))
     if not decide:
         inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
@@ -269,7 +272,17 @@ def solve(
         timings=outcome.timings,
         robust_residual_norms=robust_r,
         warnings=solve_warnings(
-            graph, stages, robust, inliers, initial_r, r, initial_fits, result_poses, settled=settled
+            graph,
+            stages,
+            robust,
+            inliers,
+            initial_r,
+            r,
+            initial_fits,
+            result_poses,
+            start=start,
+            settled=settled,
+            disputed=disputed,
         ),
         init=init,
         start=start,

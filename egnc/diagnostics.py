@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from egnc.gnc import StageReport
+from egnc.gnc import StageReport, kept_stages
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
 from egnc.metrics import ate
@@ -34,32 +34,45 @@ def solve_warnings(
     initial_fits: np.ndarray,
     result_poses: np.ndarray,
     *,
+    start: str = "guess",
     settled: bool = True,
+    disputed: np.ndarray | None = None,
 ) -> tuple[str, ...]:
     """The warnings of one solve, in the order the checks run.
 
     Args:
         graph: the input graph (its poses are the initial guess).
-        stages: per-stage reports, decision rounds included.
+        stages: per-stage reports, decision rounds and both starts included.
         robust: `(E,)` bool, loop closures that could be rejected.
         inliers: `(E,)` bool, the final classification.
         initial_r, final_r: `(E,)` whitened residual norms at the initial guess and the result.
         initial_fits: `(E,)` bool, edges that pass the outlier test at the initial guess.
         result_poses: `(N, P)` optimized poses in the graph's parametrization.
+        start: the start whose decision was kept (`egnc.gnc.kept_stages`: only its stages count).
         settled: whether the outlier decision reached a classification its own map confirms
             (`egnc.decision.Decision.settled`).
+        disputed: `(E,)` bool, loops the kept decision rejects and the other start's decision
+            accepted (`egnc.starts`); None when only one start decided.
     """
+    kept = kept_stages(tuple(stages), start)
     warnings = [
         f"stage {k} stopped at its iteration limit ({stage.iterations} iterations): the result may not"
         " have converged (raise --max-iters)"
         for k, stage in enumerate(stages, start=1)
-        if stage.status == 0 and stage.kind != "probe"
+        if stage.status == 0 and stage in kept
     ]
     if not settled:
         warnings.append(
             "the outlier decision did not settle: its last least-squares map still disagrees with the"
             " classification (rounds ran out, or a round hit its iteration limit); treat the rejected set"
             " as provisional"
+        )
+    if disputed is not None and disputed.any():
+        ids = np.flatnonzero(disputed)
+        warnings.append(
+            f"{len(ids)} rejected loop closures (edges {_listed(ids)}) were accepted by the decision from the other"
+            " start, whose truncated cost is higher: two explanations of this graph disagree on them; check them,"
+            " and the known inliers and the initial guess"
         )
     num_loops = int(np.count_nonzero(robust))
     num_rejected = int(np.count_nonzero(robust & ~inliers))
@@ -94,6 +107,12 @@ def solve_warnings(
                 f" {100 * moved / extent:.1f}% of the trajectory's extent"
             )
     return tuple(warnings)
+
+
+def _listed(ids: np.ndarray, most: int = 5) -> str:
+    """`ids` as `"3, 7, 9"`, the first `most` of them and a count of the rest."""
+    shown = ", ".join(str(int(k)) for k in ids[:most])
+    return shown if len(ids) <= most else f"{shown} and {len(ids) - most} more"
 
 
 def _extent(poses: np.ndarray, dim: int) -> float:

@@ -133,6 +133,8 @@ class StageReport:
         kind: `"gnc"` (a graduated stage), `"decision"` (a least-squares round of
             `egnc.decision`) or `"probe"` (the few iterations `egnc.starts` gives the chordal
             start; it stops at its iteration limit by design).
+        start: the start the stage belongs to, `"guess"` or `"chordal"` (`egnc.starts`); only
+            the stages of the start that was kept (`Result.start`) shape the result.
     """
 
     mu_min: float
@@ -145,10 +147,16 @@ class StageReport:
     active_edges: int
     cg_iterations: int = 0
     kind: StageKind = "gnc"
+    start: Literal["guess", "chordal"] = "guess"
 
 
 StageCallback = Callable[[StageReport], None]
 """Receives each stage's report as soon as the stage ends."""
+
+
+def kept_stages(stages: tuple[StageReport, ...], start: str) -> tuple[StageReport, ...]:
+    """The stages that shaped a result kept from `start`: that start's, without the probe (which stops by design)."""
+    return tuple(stage for stage in stages if stage.start == start and stage.kind != "probe")
 
 
 @dataclass(frozen=True, eq=False)

@@ -7,23 +7,28 @@ loop closures look large there, the kernel lets them go, and the decision rounds
 Graduated non-convexity was meant to make the result independent of the guess; from a drifted
 guess it does not.
 
-The chordal initialization (`egnc.chordal`) does not read the guess at all. It trusts every loop,
-so false loops bend it; but a bent map is easy to recognise by the truncated least-squares cost
+The chordal initialization (`egnc.chordal`) does not read the guess at all. It is solved over
+the edges the GNC stage still trusts (IRLS weight at least `SolverOptions.trust_weight`, the
+set the step solver factorizes): a loop the kernel switched off entirely there would bend the
+chordal map if false, and it would put its fill-in into both chordal factorizations (city10000
+at 50 % false loops: 6.9 s over every edge, against 2.5 s for the whole default solve). A map
+that false loops still bend is easy to recognise by the truncated least-squares cost
 (`egnc.decision.truncated_cost`), the objective both decisions are judged by: an accepted loop
 pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 
-1. Classify every loop at the chordal poses (`r^2 <= chi2.ppf(q, d)` accepted).
+1. Classify every loop, trusted or not, at the chordal poses (`r^2 <= chi2.ppf(q, d)` accepted).
 2. If that is the guess's decision already, stop: nothing to compare.
 3. Probe: unless the chordal poses' truncated cost is more than `PROBE_GATE` times the
    guess's decision's (a map bent by false loops: 5-100x on the shared files with 10-50 % false
    loops), give the accepted edges `PROBE_ITERATIONS` least-squares iterations from the chordal
    poses. A consistent set converges in a few (the chordal map of a clean graph is within a few
    percent of the optimum's cost). Stop unless the truncated cost is then below the guess's.
-4. Decide from there (`decide_outliers`, starting from that classification); adopt the result
-   only if its truncated cost is lower than the guess's decision.
+4. Decide from there (`decide_outliers`, starting from that classification); the caller keeps
+   it only if its truncated cost is lower than the guess's decision.
 
-On a graph with false loops and a good guess, this costs one chordal solve and changes nothing; on a clean graph with a drifted guess it
-returns the least-squares optimum with every loop accepted.
+On a graph with false loops and a good guess, this costs one chordal solve and changes nothing;
+on a clean graph with a drifted guess it returns the least-squares optimum with every loop
+accepted.
 """
 
 from __future__ import annotations
@@ -55,27 +60,31 @@ def chordal_decision(
     robust: np.ndarray,
     factors: BetweenFactors,
     to_beat: Decision,
+    trusted: np.ndarray,
     solver_options: SolverOptions,
     gnc_options: GncOptions,
     linear_solver: str,
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
 ) -> tuple[Decision | None, tuple[StageReport, ...]]:
-    """The decision started from the chordal initialization, if it has a lower truncated cost than `to_beat`.
+    """The decision started from the chordal initialization, unless it cannot beat `to_beat` (module docstring).
 
     Args:
         graph: the pose graph.
         robust: `(E,)` bool, the loop closures that may be rejected.
         factors: the graph's factors.
         to_beat: the decision started from the initial guess.
+        trusted: `(E,)` bool, the edges the chordal initialization uses: those the GNC stage
+            had not switched off (IRLS weight at least `SolverOptions.trust_weight`).
         solver_options: options of the probe and of the decision rounds.
         gnc_options: outlier test and readmission options.
         linear_solver: resolved backend name.
         on_stage, on_iteration: progress callbacks (the probe and each round are stages).
 
     Returns:
-        `(decision, reports)`: the better decision or None, and the reports of every solve run
-        here (the probe and the rounds), whether or not the decision was adopted.
+        `(decision, reports)`: the chordal start's decision, or None where it stopped early (same
+        classification, gate, probe), and the reports of every solve run here (the probe and
+        the rounds).
     """
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
 
@@ -83,7 +92,8 @@ def chordal_decision(
         return truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, q)
 
     try:
-        poses = to_matrices(graph.dim, chordal_initialization(graph, linear_solver=linear_solver))
+        chordal = chordal_initialization(graph.subgraph_edges(trusted), linear_solver=linear_solver)
+        poses = to_matrices(graph.dim, chordal)
     except SolverError:  # a chordal system the backend cannot factorize: no second start
         return None, ()
     inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
@@ -106,6 +116,7 @@ def chordal_decision(
         int(inliers.sum()),
         probe.linear.cg_iterations,
         kind="probe",
+        start="chordal",
     )
     if on_stage is not None:
         on_stage(report)
@@ -114,5 +125,4 @@ def chordal_decision(
     decision = decide_outliers(
         graph, probe.poses, robust, solver_options, gnc_options, linear_solver, factors, on_stage, on_iteration, inliers
     )
-    reports = (report, *decision.reports)
-    return (decision if cost(decision.poses) < target else None), reports
+    return decision, (report, *(replace(round_report, start="chordal") for round_report in decision.reports))

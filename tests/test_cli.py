@@ -30,7 +30,7 @@ PROGRESS_LINE = re.compile(
     r" [\d.]+ s \(elapsed [\d.]+ s\)$"
 )
 STAGE_KEYS = {
-    "mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges", "cg_iterations", "kind"
+    "mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges", "cg_iterations", "kind", "start"
 }
 
 

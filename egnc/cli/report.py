@@ -10,11 +10,13 @@ import numpy as np
 
 from egnc.api import Result
 from egnc.connectivity import describe_ids
+from egnc.gnc import kept_stages
 
 
 def iteration_limited_stages(result: Result) -> list[int]:
-    """1-based numbers of the stages that stopped at their iteration limit (status 0)."""
-    return [k for k, stage in enumerate(result.stages, start=1) if stage.status == 0 and stage.kind != "probe"]
+    """1-based numbers of the kept start's stages that stopped at their iteration limit (status 0)."""
+    kept = kept_stages(result.stages, result.start)
+    return [k for k, stage in enumerate(result.stages, start=1) if stage.status == 0 and stage in kept]
 
 
 def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
@@ -69,6 +71,7 @@ def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
                 "active_edges": stage.active_edges,
                 "cg_iterations": stage.cg_iterations,
                 "kind": stage.kind,
+                "start": stage.start,
             }
             for stage in result.stages
         ],
