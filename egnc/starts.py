@@ -122,7 +122,11 @@ def chordal_decision(
         on_stage(report)
     if cost(probe.poses) >= target:
         return None, (report,)
+    def relay(round_report: StageReport) -> None:
+        if on_stage is not None:
+            on_stage(replace(round_report, start="chordal"))
+
     decision = decide_outliers(
-        graph, probe.poses, robust, solver_options, gnc_options, linear_solver, factors, on_stage, on_iteration, inliers
+        graph, probe.poses, robust, solver_options, gnc_options, linear_solver, factors, relay, on_iteration, inliers
     )
     return decision, (report, *(replace(round_report, start="chordal") for round_report in decision.reports))

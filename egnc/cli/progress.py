@@ -50,8 +50,13 @@ class Progress:
 
     def on_stage(self, stage: StageReport) -> None:
         """Write the finished stage's line (over the live line on a terminal)."""
-        mu = "least squares" if math.isnan(stage.mu_mean) else f"mu {stage.mu_min:.3g}..{stage.mu_max:.3g}"
-        limit = " (iteration limit)" if stage.status == 0 else ""
+        if stage.kind == "probe":
+            mu = "chordal start, least squares probe"
+        elif math.isnan(stage.mu_mean):
+            mu = "least squares" + (" (chordal start)" if stage.start == "chordal" else "")
+        else:
+            mu = f"mu {stage.mu_min:.3g}..{stage.mu_max:.3g}"
+        limit = " (iteration limit)" if stage.status == 0 and stage.kind != "probe" else ""
         prefix = "\r" if self._line_open else ""
         self._stream.write(
             f"{prefix}stage {self._stage}: {mu}, {stage.iterations} iterations{limit}, cost {stage.cost:.6g},"
