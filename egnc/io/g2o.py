@@ -36,12 +36,16 @@ from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
-from egnc.io.information import INFORMATION_MODES, InformationMode, not_positive_definite, repair_information
+from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
 from egnc.io.numbers import check_line_characters, is_float, is_integer, parse_floats, parse_integers
 from egnc.io.text import read_text
-
-_MIN_QUATERNION_NORM = 1e-6
-"""Quaternions shorter than this are treated as corrupt rather than normalized."""
+from egnc.validity import (
+    NO_EDGES,
+    first_bad_quaternion,
+    first_self_edge,
+    not_positive_definite,
+    not_positive_definite_message,
+)
 
 _INT64_MAX = np.iinfo(np.int64).max
 
@@ -140,7 +144,7 @@ def read_g2o(
     split = _split_plain_records(lines) if _NOT_PLAIN_TEXT.search(text) is None else None
     dim, vertices, edges, fixes, unknown = split or _split_records(lines, context, skip_unknown)
     if dim is None or not edges.rows:
-        raise context.error("no EDGE_SE2 or EDGE_SE3:QUAT lines: a pose graph needs edges")
+        raise context.error(f"no EDGE_SE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
 
     notes = [_describe_skipped(path, unknown)] if unknown else []
     vertex_tag, edge_tag = _VERTEX_TAGS[dim], _EDGE_TAGS[dim]
@@ -394,21 +398,10 @@ def _check_finite(
 
 
 def _check_quaternions(quaternions: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject quaternions that cannot be normalized in double precision (stored values are kept as read).
-
-    Too short (norm below `_MIN_QUATERNION_NORM`, most likely corrupt) or so long that the sum of
-    squares overflows (a component above about 1e154).
-    """
-    with np.errstate(over="ignore"):
-        norms = np.sqrt(np.einsum("ij,ij->i", quaternions, quaternions))
-    bad = np.flatnonzero(~(norms >= _MIN_QUATERNION_NORM) | ~np.isfinite(norms))
-    if len(bad):
-        k = bad[0]
-        problem = "too small" if norms[k] < _MIN_QUATERNION_NORM else "too large (overflows a double)"
-        raise context.error(
-            f"quaternion (qx qy qz qw) = {quaternions[k].tolist()} has a norm {problem} to normalize",
-            int(lines[k]),
-        )
+    """Reject quaternions that cannot be normalized (`egnc.validity`); stored values are kept as read."""
+    found = first_bad_quaternion(quaternions)
+    if found:
+        raise context.error(found[1], int(lines[found[0]]))
 
 
 def _check_unique_vertices(vertex_ids: np.ndarray, lines: np.ndarray, context: _Context) -> None:
@@ -427,12 +420,10 @@ def _check_unique_vertices(vertex_ids: np.ndarray, lines: np.ndarray, context: _
 
 
 def _check_no_self_edges(edge_ids: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject an edge from a vertex to itself (it measures nothing)."""
-    bad = np.flatnonzero(edge_ids[:, 0] == edge_ids[:, 1])
-    if len(bad):
-        raise context.error(
-            f"edge joins vertex {edge_ids[bad[0], 0]} to itself", int(lines[bad[0]])
-        )
+    """Reject an edge from a vertex to itself (`egnc.validity`)."""
+    found = first_self_edge(edge_ids)
+    if found:
+        raise context.error(found[1], int(lines[found[0]]))
 
 
 def _positive_definite(
@@ -447,13 +438,11 @@ def _positive_definite(
     bad = not_positive_definite(information)
     if not len(bad):
         return information, None
-    share = f"{len(bad)} of the file's {len(information)} edges are affected"
     if mode == "strict":
-        k = bad[0]
         raise context.error(
-            f"information matrix is not positive definite (diagonal {np.diagonal(information[k]).tolist()}); "
-            f"{share}; --information nearest-pd or diagonal (information= in read_g2o) repairs them",
-            int(lines[k]),
+            f"{not_positive_definite_message(information, bad)}; "
+            "--information nearest-pd or diagonal (information= in read_g2o) repairs them",
+            int(lines[bad[0]]),
         )
     information, still_bad, repair = repair_information(information, bad, mode)
     if len(still_bad):

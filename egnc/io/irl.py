@@ -57,10 +57,10 @@ from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
-from egnc.io.information import not_positive_definite
 from egnc.io.numbers import check_line_characters, format_floats, is_float, is_integer
 from egnc.io.text import read_text
 from egnc.lie import so3
+from egnc.validity import not_positive_definite
 
 __all__ = ["IrlLog", "IrlPrior", "read_irl", "write_irl"]
 
