@@ -63,11 +63,13 @@ def check_choice(name: str, value: object, choices: Collection[str]) -> str:
 def check_instance(name: str, value: object, kind: type | tuple[type, ...], what: str | None = None) -> None:
     """Refuse `value` unless it is a `kind` (e.g. a dict given where `SolverOptions` is expected).
 
-    `what` names the expected kind in the message (default: the class name).
+    `what` names the expected kind in the message, with its article (default: the class name).
     """
     if not isinstance(value, kind):
-        expected = what or (kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind))
-        raise OptionTypeError(f"{name} must be a {expected}, got {type(value).__name__}")
+        if what is None:
+            names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
+            what = f"{'an' if names[0] in 'AEIOUaeiou' else 'a'} {names}"
+        raise OptionTypeError(f"{name} must be {what}, got {type(value).__name__}")
 
 
 def check_callable(name: str, value: object) -> None:

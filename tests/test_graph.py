@@ -45,7 +45,8 @@ def test_negative_definite_information_is_refused_like_the_reader(dim, tmp_path)
         for k, (i, j) in enumerate(chain().edges.tolist())
     )
     path.write_text(text + "\n")
-    with pytest.raises(G2oFormatError, match=r"bad.g2o:3: information matrix is not positive definite .*1 of the 4 edges"):
+    message = r"bad.g2o:3: information matrix is not positive definite .*1 of the 4 edges"
+    with pytest.raises(G2oFormatError, match=message):
         read_g2o(path)
 
 
