@@ -31,8 +31,9 @@ from typing import NoReturn
 
 import numpy as np
 
+from egnc.checks import check_bool, check_choice, check_instance
 from egnc.connectivity import describe_ids, hold_isolated_fixed, isolated_vertices, require_connected
-from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
+from egnc.errors import EgncWarning, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
@@ -134,9 +135,11 @@ def read_g2o(
     Raises:
         G2oFormatError: the file cannot be read or is malformed; names the file and line.
         GraphError: the file is well formed but its graph is disconnected.
+        OptionError: an argument has the wrong type or value.
     """
-    if information not in INFORMATION_MODES:
-        raise EgncError(f"information must be one of {', '.join(INFORMATION_MODES)}, got {information!r}")
+    check_instance("path", path, (str, os.PathLike), "a g2o file path (str or os.PathLike)")
+    check_bool("skip_unknown", skip_unknown)
+    check_choice("information", information, INFORMATION_MODES)
     path = Path(path)
     text = read_text(path)
     lines = text.split("\n")
@@ -223,9 +226,12 @@ def write_g2o(
             vertices are written regardless.
 
     Raises:
+        OptionTypeError: `graph` is not a `PoseGraph` or `path` not a path (e.g. the two swapped).
         ValueError: `keep_edges` is not an `(E,)` boolean mask.
         GraphError: the graph holds non-finite values, which no reader would accept.
     """
+    check_instance("graph", graph, PoseGraph)
+    check_instance("path", path, (str, os.PathLike), "a file path (str or os.PathLike)")
     keep = np.ones(graph.num_edges, dtype=bool) if keep_edges is None else np.asarray(keep_edges)
     if keep.dtype != bool or keep.shape != (graph.num_edges,):
         raise ValueError(

@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
+from egnc.checks import check_instance
 from egnc.connectivity import connected_components, describe_components, require_connected
 from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
@@ -242,6 +243,7 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
         GraphError: the entries are well formed but do not make a solvable graph (a pose not
             reached by odometry, a covariance that is not positive definite).
     """
+    check_instance("path", path, (str, os.PathLike), "an IRL file path (str or os.PathLike)")
     path = Path(path)
     text = read_text(path)
     lines = text.split("\n")
@@ -300,6 +302,8 @@ def write_irl(log: IrlLog, path: str | os.PathLike) -> None:
     The header, then the PRIOR (if any), then one ODOMETRY or LOOP line per edge in order. Floats
     are written with `repr`, so `read_irl` gives back bit-identical arrays.
     """
+    check_instance("log", log, IrlLog)
+    check_instance("path", path, (str, os.PathLike), "a file path (str or os.PathLike)")
     lines = [log.name, log.date, str(log.dim), "nonlinear", log.notes]
     if log.prior is not None:
         prior = log.prior
