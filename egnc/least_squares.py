@@ -54,9 +54,12 @@ STATUS_MESSAGES = {
     3: "converged: step below step_tol",
     4: "stopped: no step decreases the cost",
     5: "numerical failure: the cost or the gradient is not finite",
+    6: "nothing to optimize: every pose is fixed",
 }
 NUMERICAL_FAILURE = 5
 """Status of a solve stopped by non-finite numbers (`egnc.health` refuses most such inputs earlier)."""
+NOTHING_TO_OPTIMIZE = 6
+"""Status of `egnc.solve` on a graph whose poses are all fixed: it is returned unchanged."""
 CONVERGED = (1, 2, 3)
 
 IterationCallback = Callable[[int, float], None]
