@@ -8,6 +8,12 @@ ignored; numbers follow the grammar of `egnc.io.numbers`:
 - `VERTEX_SE3:QUAT id x y z qx qy qz qw`
 - `EDGE_SE3:QUAT i j dx dy dz qx qy qz qw` + 21 information entries
 - `FIX id [id ...]`
+- TORO's 2D records, as GTSAM's `load2D` reads them: `VERTEX2 id x y theta`, and
+  `EDGE2 i j dx dy dtheta I11 I12 I22 I33 I13 I23`: the information matrix in TORO's order
+  (`inf_ff inf_fs inf_ss inf_rr inf_fr inf_sr`; GTSAM's `NoiseFormatTORO`, checked against the
+  gtsam 4.3 wheel). GTSAM's default `NoiseFormatAUTO` instead guesses a covariance from some
+  zero patterns; egnc follows TORO's definition. `write_g2o` writes them as `VERTEX_SE2` and
+  `EDGE_SE2`.
 
 Information matrices are given as their upper triangle, row-major, ordered translation-then-rotation
 (`x y theta` in 2D, `x y z rx ry rz` in 3D). Values are stored exactly as read: angles are not
@@ -38,7 +44,7 @@ from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
 from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
-from egnc.io.numbers import check_line_characters, is_float, is_integer, parse_floats, parse_integers
+from egnc.io.numbers import check_line_characters, is_float, parse_floats, parse_id, parse_integers, shown
 from egnc.io.text import read_text
 from egnc.validity import (
     NO_EDGES,
@@ -47,8 +53,6 @@ from egnc.validity import (
     not_positive_definite,
     not_positive_definite_message,
 )
-
-_INT64_MAX = np.iinfo(np.int64).max
 
 
 @dataclass(frozen=True)
@@ -61,6 +65,7 @@ class _Tag:
     num_ids: int
     num_values: int
     layout: str
+    toro: bool = False
 
     @property
     def num_fields(self) -> int:
@@ -78,7 +83,13 @@ _EDGE_TAGS = {
         "EDGE_SE3:QUAT", "edge", 3, 2, 7 + 21, "i j dx dy dz qx qy qz qw and 21 information entries"
     ),
 }
-_TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values())}
+_TORO_TAGS = (
+    _Tag("VERTEX2", "vertex", 2, 1, 3, "id x y theta", toro=True),
+    _Tag("EDGE2", "edge", 2, 2, 3 + 6, "i j dx dy dtheta I11 I12 I22 I33 I13 I23", toro=True),
+)
+_TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values(), *_TORO_TAGS)}
+_TORO_TO_G2O_UPPER = np.array([0, 1, 4, 2, 5, 3])
+"""TORO's `I11 I12 I22 I33 I13 I23` to g2o's row-major upper triangle `I11 I12 I13 I22 I23 I33`."""
 _FIX = "FIX"
 _TAG_NAME = re.compile(r"[A-Z][A-Z0-9_:]*", re.IGNORECASE)
 """What a record tag looks like (`VERTEX_XY`, `PARAMS_SE3OFFSET`, ...): anything else is damage, never skipped."""
@@ -147,7 +158,7 @@ def read_g2o(
     split = _split_plain_records(lines) if _NOT_PLAIN_TEXT.search(text) is None else None
     dim, vertices, edges, fixes, unknown = split or _split_records(lines, context, skip_unknown)
     if dim is None or not edges.rows:
-        raise context.error(f"no EDGE_SE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
+        raise context.error(f"no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
 
     notes = [_describe_skipped(path, unknown)] if unknown else []
     vertex_tag, edge_tag = _VERTEX_TAGS[dim], _EDGE_TAGS[dim]
@@ -158,10 +169,15 @@ def read_g2o(
     edge_lines = np.asarray(edges.lines, dtype=np.int64)
     p, d = POSE_SIZE[dim], TANGENT_SIZE[dim]
     measurements = edge_values[:, :p]
-    information_matrices = _information_from_upper(edge_values[:, p:], d)
+    upper = edge_values[:, p:]
+    toro = np.fromiter((row[0] == "EDGE2" for row in edges.rows), dtype=bool, count=len(edges.rows))
+    if toro.any():
+        upper = upper.copy()
+        upper[toro] = upper[toro][:, _TORO_TO_G2O_UPPER]
+    information_matrices = _information_from_upper(upper, d)
 
-    _check_finite(vertex_values, vertex_lines, vertex_tag, 1 + vertex_tag.num_ids, context)
-    _check_finite(edge_values, edge_lines, edge_tag, 1 + edge_tag.num_ids, context)
+    _check_finite(vertex_values, vertices, 1 + vertex_tag.num_ids, context)
+    _check_finite(edge_values, edges, 1 + edge_tag.num_ids, context)
     if dim == 3:
         _check_quaternions(vertex_values[:, 3:7], vertex_lines, context)
         _check_quaternions(measurements[:, 3:7], edge_lines, context)
@@ -282,12 +298,12 @@ def _split_records(
                 fixes.rows.append(fields)
                 fixes.lines.append(line_number)
             elif not _TAG_NAME.fullmatch(name):
-                raise context.error(f"line starts with {name!r}, which is not a record tag", line_number)
+                raise context.error(f"line starts with {shown(name)}, which is not a record tag", line_number)
             elif skip_unknown:
                 unknown.append(raw_line)
             else:
                 raise context.error(
-                    f"unknown tag {name!r}; "
+                    f"unknown tag {shown(name)}; "
                     "pass skip_unknown=True / --skip-unknown to skip such lines (they are written back with -o)",
                     line_number,
                 )
@@ -338,9 +354,12 @@ def _split_plain_records(lines: list[str]) -> tuple[int | None, _Records, _Recor
         if (min(lengths) < 2) if name == _FIX else (lengths != {1 + _TAGS[name].num_fields}):
             return None
         grouped[name] = group
+    kinds = [_TAGS[name].kind for name in names - {_FIX}]
+    if len(kinds) != len(set(kinds)):  # g2o and TORO records of one kind: their file order is the loop's job
+        return None
     empty = _Records([], [])
-    vertices = grouped.get(_VERTEX_TAGS[dim].name, empty) if dim else empty
-    edges = grouped.get(_EDGE_TAGS[dim].name, empty) if dim else empty
+    vertices = next((grouped[name] for name in names - {_FIX} if _TAGS[name].kind == "vertex"), empty)
+    edges = next((grouped[name] for name in names - {_FIX} if _TAGS[name].kind == "edge"), empty)
     return dim, vertices, edges, grouped.get(_FIX, empty), []
 
 
@@ -372,34 +391,31 @@ def _raise_first_bad_field(records: _Records, tag: _Tag, context: _Context) -> N
     for row, line_number in zip(records.rows, records.lines):
         for position, token in enumerate(row[1:], start=1):
             if position <= tag.num_ids:
-                _parse_id(token, tag.name, position, line_number, context)
+                _parse_id(token, row[0], position, line_number, context)
             elif not is_float(token):
-                raise context.error(
-                    f"{tag.name} field {position} is {token!r}, expected a number", line_number
-                )
+                raise context.error(f"{row[0]} field {position} is {shown(token)}, expected a number", line_number)
     raise AssertionError("no bad field found")
 
 
 def _parse_id(token: str, tag_name: str, position: int, line_number: int, context: _Context) -> int:
-    """Parse one vertex id, raising for its line unless it is an int64 integer."""
-    if not is_integer(token) or abs(int(token)) > _INT64_MAX:
+    """Parse one vertex id, raising for its line unless it is an int64 integer (`parse_id`)."""
+    value = parse_id(token)
+    if value is None:
         raise context.error(
-            f"{tag_name} field {position} is {token!r}, expected an integer vertex id", line_number
+            f"{tag_name} field {position} is {shown(token)}, expected an integer vertex id in the int64 range",
+            line_number,
         )
-    return int(token)
+    return value
 
 
-def _check_finite(
-    values: np.ndarray, lines: np.ndarray, tag: _Tag, first_field: int, context: _Context
-) -> None:
-    """Reject NaN and infinite values, naming the first offending line and field."""
+def _check_finite(values: np.ndarray, records: _Records, first_field: int, context: _Context) -> None:
+    """Reject NaN and infinite values, naming the first offending line, tag and field."""
     bad = ~np.isfinite(values)
     if bad.any():
         row, column = np.argwhere(bad)[0]
         raise context.error(
-            f"{tag.name} field {first_field + column} is {values[row, column]}, "
-            "expected a finite number",
-            int(lines[row]),
+            f"{records.rows[row][0]} field {first_field + column} is {values[row, column]}, expected a finite number",
+            records.lines[row],
         )
 
 
