@@ -13,7 +13,7 @@ from egnc.checks import check_callable, check_choice, check_instance
 from egnc.chordal import chordal_initialization
 from egnc.decision import decide_outliers, truncated_cost
 from egnc.diagnostics import solve_warnings
-from egnc.errors import EgncError, GraphError
+from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
     GncOptions,
@@ -364,10 +364,17 @@ def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = No
 
     Raises:
         GraphError: an id is not a vertex of the graph.
-        OptionTypeError: `result` is not a `Result`.
+        OptionError: `result` is not a `Result`, or `ids` not a 1-D sequence of integers.
     """
     check_instance("result", result, Result)
     graph = result.graph
+    if ids is not None:
+        try:
+            requested = np.asarray(ids)
+        except ValueError:  # ragged nesting
+            requested = np.asarray(None)
+        if requested.dtype.kind not in "iu" or requested.ndim > 1:
+            raise OptionError(f"ids must be a vertex id or a 1-D sequence of them (integers), got {ids!r:.60}")
     ids = graph.vertex_ids if ids is None else np.asarray(ids, dtype=np.int64).reshape(-1)
     rows = np.searchsorted(graph.vertex_ids, ids)
     rows = np.minimum(rows, graph.num_poses - 1)

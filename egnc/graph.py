@@ -50,18 +50,38 @@ and already checked, they are shared by the graphs derived from one another (`wi
 `dataclasses.replace`) instead of being copied and checked again."""
 
 
-def _private_copy(value: object, dtype: type) -> np.ndarray:
-    """A read-only view of a new copy of `value` as `dtype`: its base is not the caller's array."""
-    copy: np.ndarray = np.array(value, dtype=dtype)
+def _private_copy(name: str, value: object, dtype: type) -> np.ndarray:
+    """A read-only view of a new copy of `value` as `dtype`: its base is not the caller's array.
+
+    Raises:
+        GraphError: `value` holds something other than numbers, or non-integers for an integer
+            field (NumPy would truncate 1.5 to 1 without a word).
+    """
+    try:
+        source = np.asarray(value)
+        if np.issubdtype(dtype, np.integer) and source.dtype.kind == "f" and not np.all(np.mod(source, 1) == 0):
+            raise ValueError("not integers")
+        copy: np.ndarray = np.array(source, dtype=dtype)
+    except (TypeError, ValueError):
+        kind = "integers" if np.issubdtype(dtype, np.integer) else "bools" if dtype is bool else "numbers"
+        raise GraphError(f"{name} must be an array of {kind}, got {_describe(value)}") from None
     copy.setflags(write=False)
     view = copy.view()
     _OWNED[id(view)] = view
     return view
 
 
+def _describe(value: object) -> str:
+    """A short description of a value for an error message (never a whole array)."""
+    if isinstance(value, np.ndarray):
+        return f"an array of dtype {value.dtype} and shape {value.shape}"
+    text = repr(value)
+    return text if len(text) <= 40 else f"a {type(value).__name__}"
+
+
 def _is_owned(value: object) -> bool:
     """Whether `value` is an array some `PoseGraph` made with `_private_copy`."""
-    return _OWNED.get(id(value)) is value
+    return isinstance(value, np.ndarray) and _OWNED.get(id(value)) is value
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,19 +121,20 @@ class PoseGraph:
     unknown_lines: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if isinstance(self.dim, bool) or self.dim not in POSE_SIZE:
-            raise GraphError(f"dim must be 2 or 3, got {self.dim!r}")
+        if isinstance(self.dim, bool) or not isinstance(self.dim, (int, np.integer)) or self.dim not in POSE_SIZE:
+            raise GraphError(f"dim must be 2 or 3, got {_describe(self.dim)}")
         object.__setattr__(self, "dim", int(self.dim))
         p, d = POSE_SIZE[self.dim], TANGENT_SIZE[self.dim]
-        n = len(self.vertex_ids)
-        e = len(self.edges)
-        if self.fixed is None:
-            object.__setattr__(self, "fixed", np.zeros(n, dtype=bool))
-        if self.edge_lines is None:
-            object.__setattr__(self, "edge_lines", np.zeros(e, dtype=np.int64))
-        new = {name for name in _DTYPES if not _is_owned(getattr(self, name))}
+        given = {name for name in _DTYPES if name not in ("fixed", "edge_lines") or getattr(self, name) is not None}
+        new = {name for name in given if not _is_owned(getattr(self, name))}
         for name in new:
-            object.__setattr__(self, name, _private_copy(getattr(self, name), _DTYPES[name]))
+            object.__setattr__(self, name, _private_copy(name, getattr(self, name), _DTYPES[name]))
+        n = len(self.vertex_ids) if self.vertex_ids.ndim else 0
+        e = len(self.edges) if self.edges.ndim else 0
+        if "fixed" not in given:
+            object.__setattr__(self, "fixed", _private_copy("fixed", np.zeros(n), bool))
+        if "edge_lines" not in given:
+            object.__setattr__(self, "edge_lines", _private_copy("edge_lines", np.zeros(e), np.int64))
         expected = {
             "vertex_ids": (n,),
             "poses": (n, p),
@@ -196,7 +217,7 @@ class PoseGraph:
 
     def with_poses(self, poses: np.ndarray) -> PoseGraph:
         """Return a copy of the graph with new poses `(N, P)`, e.g. an optimized trajectory."""
-        return replace(self, poses=np.array(poses, dtype=np.float64))
+        return replace(self, poses=poses)
 
     def subgraph_edges(self, keep: np.ndarray) -> PoseGraph:
         """Return a copy with only the edges where `keep` `(E,)` bool is true (poses unchanged).

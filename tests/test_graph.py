@@ -125,3 +125,28 @@ def test_repr_is_short():
         f"loop_closures={int(graph.is_loop_closure.sum())}, fixed=0)"
     )
     assert len(text) < 100
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (dict(edges="x"), "edges must be an array of integers, got 'x'"),
+        (dict(edges=None), "edges must be an array of integers, got None"),
+        (dict(edges=np.array([[0.0, 1.5], [1, 2], [2, 3], [3, 0]])), "edges must be an array of integers"),
+        (dict(poses="x"), "poses must be an array of numbers, got 'x'"),
+        (dict(vertex_ids=None), "vertex_ids must be an array of integers"),
+        (dict(dim=[2]), r"dim must be 2 or 3, got \[2\]"),
+        (dict(dim=2.0), "dim must be 2 or 3, got 2.0"),
+    ],
+)
+def test_arrays_that_are_not_numbers_name_the_field(change, message):
+    # Found by benchmarks/fuzz_api.py: NumPy's own ValueError or an AttributeError named nothing,
+    # and float ids were truncated (1.5 -> 1) without a word.
+    with pytest.raises(GraphError, match=f"^{message}"):
+        dataclasses.replace(chain(), **change)
+
+
+def test_integral_floats_are_accepted_as_ids():
+    graph = chain()
+    as_floats = dataclasses.replace(graph, edges=np.array(graph.edges, dtype=float))
+    np.testing.assert_array_equal(as_floats.edges, graph.edges)

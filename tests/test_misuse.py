@@ -110,3 +110,18 @@ def test_every_pose_fixed_from_the_cli_writes_the_graph_unchanged(all_fixed, tmp
     np.testing.assert_array_equal(written.poses, original.poses)
     np.testing.assert_array_equal(written.fixed, [True, True])
     np.testing.assert_array_equal(written.measurements, original.measurements)
+
+
+@pytest.mark.parametrize("ids", [["a"], [[0, 1], [2]], [1.5], "x", [[0]]])
+def test_marginal_covariances_ids_that_are_not_vertex_ids_are_named(ids):
+    result = solve(GRID2D, "l2")
+    with pytest.raises(OptionError, match="^ids must be a vertex id or a 1-D sequence of them"):
+        marginal_covariances(result, ids)
+    assert marginal_covariances(result, np.int64(3)).shape == (1, 3, 3)
+
+
+def test_keep_edges_of_the_wrong_shape_is_an_option_error(tmp_path):
+    graph = read_g2o(GRID2D)
+    with pytest.raises(OptionError, match=r"keep_edges must be a boolean mask of shape"):
+        write_g2o(graph, tmp_path / "out.g2o", keep_edges=np.ones(3, dtype=bool))
+    assert not (tmp_path / "out.g2o").exists()

@@ -39,7 +39,7 @@ import numpy as np
 
 from egnc.checks import check_bool, check_choice, check_instance
 from egnc.connectivity import describe_ids, hold_isolated_fixed, isolated_vertices, require_connected
-from egnc.errors import EgncWarning, G2oFormatError, GraphError
+from egnc.errors import EgncWarning, G2oFormatError, GraphError, OptionError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
@@ -243,14 +243,14 @@ def write_g2o(
 
     Raises:
         OptionTypeError: `graph` is not a `PoseGraph` or `path` not a path (e.g. the two swapped).
-        ValueError: `keep_edges` is not an `(E,)` boolean mask.
+        OptionError: `keep_edges` is not an `(E,)` boolean mask (a `ValueError` too).
         GraphError: the graph holds non-finite values, which no reader would accept.
     """
     check_instance("graph", graph, PoseGraph)
     check_instance("path", path, (str, os.PathLike), "a file path (str or os.PathLike)")
     keep = np.ones(graph.num_edges, dtype=bool) if keep_edges is None else np.asarray(keep_edges)
     if keep.dtype != bool or keep.shape != (graph.num_edges,):
-        raise ValueError(
+        raise OptionError(
             f"keep_edges must be a boolean mask of shape ({graph.num_edges},), "
             f"got dtype {keep.dtype} and shape {keep.shape}"
         )
