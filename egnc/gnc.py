@@ -117,7 +117,7 @@ class GncOptions:
         for name in ("outlier_quantile", "readmit_quantile"):
             value = getattr(self, name)
             checked[name] = check_float(f"GncOptions.{name}", value, 0.0, 1.0, open_low=True, open_high=True)
-        for name in ("refine", "readmit", "warm_start", "every_stage"):
+        for name in ("refine", "readmit", "warm_start", "chordal_start", "every_stage"):
             checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
         for name, value in checked.items():
             object.__setattr__(self, name, value)

@@ -51,6 +51,7 @@ BAD_SOLVER_OPTIONS = [
 BAD_GNC_OPTIONS = [
     ("warm_start", "no"),
     ("warm_start", 0),
+    ("chordal_start", "no"),
     ("refine", None),
     ("readmit", "yes"),
     ("every_stage", 1.0),
