@@ -1,17 +1,20 @@
-"""Fuzz the g2o reader and the solver with seeded mutants of real and generated pose graphs.
+"""Fuzz egnc with seeded cases: mutated files (here), option values (`fuzz_options.py`), API misuse (`fuzz_api.py`).
 
-Each mutant is a small g2o text changed by one random operator (byte flips, truncation, deleted,
-repeated or swapped lines, swapped fields, huge, tiny and non-numeric numbers, Unicode separators,
-CRLF, foreign tags). For each one:
+Files: each mutant is a small g2o or IRL text changed by one random operator (byte flips,
+truncation, deleted, repeated or swapped lines, swapped fields, huge, tiny and non-numeric numbers,
+Unicode separators, CRLF, foreign tags; since issue 19 also integers of 5000 digits, a byte-order
+mark, TORO records, a 2 MiB line, FIX on every vertex and a deleted IRL header line). For each one:
 
-- reading must give a `PoseGraph` or an `EgncError`;
+- reading must give a `PoseGraph` or an `EgncError`, within `TIME_LIMIT_S` (else a hang); the
+  mutants that are invalid by construction (`INVALID_OPERATORS`) must give the error;
 - an accepted graph is solved with `l2` and `egnc` (a few iterations per stage): the result must be
-  finite or an `EgncError`; its JSON report must be strict JSON;
+  finite or an `EgncError`; its JSON report must be strict JSON; a graph with every vertex fixed
+  must come back with the "nothing to optimize" status, not "converged";
 - nothing may be printed on stdout (file descriptor 1, so BLAS messages count too).
 
-`python benchmarks/fuzz.py [--cases N] [--seed S]` prints the outcomes by class as a markdown table
-(recorded in RELIABILITY.md) and exits 1 if any mutant ended in another exception, a non-finite
-result, stdout output or invalid JSON. `tests/test_fuzz.py` runs the same kind of cases, fewer.
+`python benchmarks/fuzz.py [--target files|options|api|all] [--cases N] [--seed S]` prints the
+outcomes by class as markdown tables (recorded in RELIABILITY.md) and exits 1 if any case is a
+bug (`bad`). `tests/test_fuzz.py` runs the same kind of cases, fewer.
 """
 
 from __future__ import annotations
@@ -22,9 +25,11 @@ import contextlib
 import json
 import os
 import random
+import signal
 import sys
 import tempfile
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,15 +38,19 @@ import numpy as np
 import egnc
 from egnc.cli.report import report_dict
 from egnc.errors import EgncError
-from egnc.io import read_g2o, write_g2o
+from egnc.io import IrlLog, read_g2o, read_irl, write_g2o, write_irl
+from egnc.least_squares import NOTHING_TO_OPTIMIZE
 
 DATASETS = Path(__file__).parents[1] / "datasets"
 METHODS = ("l2", "egnc")
 SOLVER_OPTIONS = egnc.SolverOptions(max_iterations=5)
 GNC_OPTIONS = egnc.GncOptions(max_stages=8)
 """Few iterations and stages: the fuzzer looks for crashes and non-finite numbers, not optima."""
-BAD_OUTCOMES = ("crash", "non-finite result", "stdout output", "invalid JSON")
+BAD_OUTCOMES = ("crash", "hang", "accepted invalid", "non-finite result", "converged with nothing to solve",
+                "stdout output", "invalid JSON")  # fmt: skip
 """Outcome classes that are bugs."""
+TIME_LIMIT_S = 60.0
+"""A case (read and both solves) taking longer is a hang: the cases are graphs of at most 30 poses."""
 
 SPECIAL_NUMBERS = (
     "1e300", "-1e300", "1e20", "1e-320", "5e-324", "0", "-0", "nan", "-inf", "1e400", "1e+05",
@@ -50,8 +59,17 @@ SPECIAL_NUMBERS = (
 SEPARATORS = ("\x1c", "\u2028", "\xa0", "\r", "\x0b", "\t", "\x00")
 OPERATORS = (
     "byte", "truncate", "delete line", "repeat line", "swap lines", "number", "swap fields", "separator", "crlf",
-    "foreign line", "scale",
+    "foreign line", "scale", "huge integer", "bom", "toro", "long line", "fix all", "drop header line",
 )  # fmt: skip
+INVALID_OPERATORS = ("huge integer", "long line", "drop header line")
+"""Operators whose every mutant is invalid: reading it must fail with an `EgncError`. An integer field
+of 5000 digits is out of range wherever it stands; a 2 MiB line is over the readers' bound; an IRL
+header without one of its five lines shifts the others (without its notes line the PRIOR used to be
+read as the notes)."""
+G2O_ONLY = ("toro", "fix all")
+IRL_ONLY = ("drop header line",)
+TORO_ORDER = (0, 1, 3, 5, 2, 4)
+"""g2o's upper triangle `I11 I12 I13 I22 I23 I33` to TORO's `I11 I12 I22 I33 I13 I23`."""
 FOREIGN_LINES = ("VERTEX_XY 9999 1 2", "PARAMS_SE3OFFSET 0 0 0 0 0 0 0 1", "FIX 0", "FIX 123456")
 
 
@@ -69,6 +87,9 @@ def source_texts(poses: int = 30) -> dict[str, str]:
             out = Path(folder) / path.name
             write_g2o(small, out)
             texts[path.name] = out.read_text()
+            log = IrlLog.from_graph(small, date="2026-11-25", notes="fuzz source")
+            write_irl(log, out.with_suffix(".irl"))
+            texts[f"{path.stem}.irl"] = out.with_suffix(".irl").read_text()
     texts["generated_2d"] = _generated(2)
     texts["generated_3d"] = _generated(3)
     return texts
@@ -87,12 +108,15 @@ def _generated(dim: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def mutate(text: str, rng: random.Random) -> tuple[str, str]:
-    """One random mutation of a g2o text: `(operator name, mutated text)`."""
+def mutate(text: str, rng: random.Random, irl: bool = False) -> tuple[str, str]:
+    """One random mutation of a g2o (or IRL) text: `(operator name, mutated text)`."""
     lines = text.split("\n")
     k = rng.randrange(len(lines))
     fields = lines[k].split(" ")
-    operator = rng.choice(OPERATORS)
+    excluded = G2O_ONLY if irl else IRL_ONLY
+    operator = rng.choice([name for name in OPERATORS if name not in excluded])
+    if operator in ("huge integer", "bom", "toro", "long line", "fix all", "drop header line"):
+        return operator, _mutate_issue19(operator, lines, rng)
     if operator == "byte":  # any byte, so invalid UTF-8 too (kept as a surrogate escape until written)
         data = bytearray(text.encode("utf-8", "surrogateescape"))
         data[rng.randrange(len(data))] = rng.randrange(256)
@@ -125,6 +149,40 @@ def mutate(text: str, rng: random.Random) -> tuple[str, str]:
     return operator, "\n".join(lines)
 
 
+def _mutate_issue19(operator: str, lines: list[str], rng: random.Random) -> str:
+    """The operators added with issue 19 (see the module docstring)."""
+    if operator == "huge integer":  # an integer field anywhere: an id, a count, a number written as "0"
+        spots = [(k, j) for k, line in enumerate(lines) for j, token in enumerate(line.split(" ")) if token.isdigit()]
+        k, j = rng.choice(spots)
+        fields = lines[k].split(" ")
+        fields[j] = rng.choice(("-", "", "0" * 4400)) + "9" * rng.choice((4301, 5000))  # past the digit limit
+        lines[k] = " ".join(fields)
+    elif operator == "bom":
+        return "\ufeff" + "\n".join(lines)
+    elif operator == "toro":  # some 2D records as TORO's VERTEX2 / EDGE2: the same graph
+        lines = [_toro(line) if rng.random() < 0.5 else line for line in lines]
+    elif operator == "long line":
+        lines.insert(rng.randrange(len(lines) + 1), "# " + "x" * (2 << 20))
+    elif operator == "fix all":
+        ids = {token for line in lines if line.startswith(("VERTEX", "EDGE")) for token in line.split(" ")[1:3]}
+        ids = {token for token in ids if token.lstrip("-").isdigit()}
+        lines.append("FIX " + " ".join(sorted(ids)))
+    else:  # drop header line (IRL)
+        del lines[rng.randrange(5)]
+    return "\n".join(lines)
+
+
+def _toro(line: str) -> str:
+    """A `VERTEX_SE2` or `EDGE_SE2` line in TORO's form (other lines unchanged)."""
+    fields = line.split(" ")
+    if fields[0] == "VERTEX_SE2":
+        return " ".join(["VERTEX2", *fields[1:]])
+    if fields[0] == "EDGE_SE2" and len(fields) == 12:
+        upper = fields[6:]
+        return " ".join(["EDGE2", *fields[1:6], *(upper[k] for k in TORO_ORDER)])
+    return line
+
+
 def _scaled(field: str, factor: float) -> str:
     try:
         return repr(float(field) * factor) if "." in field or "e" in field else field
@@ -140,6 +198,26 @@ class Outcome:
     read: str  # one of READ_CLASSES
     solves: list[str]  # per method, one of SOLVE_CLASSES
     stdout: bool
+
+
+class Hang(BaseException):
+    """A case ran past its time limit (a `BaseException`, so no `except Exception` in egnc swallows it)."""
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float) -> Iterator[None]:
+    """Raise `Hang` in the block once `seconds` of wall time have passed (SIGALRM; main thread only)."""
+
+    def expire(signum: int, frame: object) -> None:
+        raise Hang
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 @contextlib.contextmanager
@@ -160,21 +238,23 @@ def stdout_captured() -> Iterator[list[bytes]]:
             captured.append(sink.read())
 
 
-def run_case(text: str, operator: str, folder: Path) -> Outcome:
+def run_case(text: str, operator: str, folder: Path, irl: bool = False) -> Outcome:
     """Read the mutant and solve it when accepted, classifying each step."""
-    path = folder / "mutant.g2o"
+    path = folder / ("mutant.irl" if irl else "mutant.g2o")
     path.write_bytes(text.encode("utf-8", "surrogateescape"))
-    solves = []
+    solves: list[str] = []
     with stdout_captured() as output:
         try:
-            graph = read_g2o(path, skip_unknown=True)
-            read = "graph"
+            with time_limit(TIME_LIMIT_S):
+                graph = read_irl(path).graph if irl else read_g2o(path, skip_unknown=True)
+                read = "accepted invalid" if operator in INVALID_OPERATORS else "graph"
+                solves = [_solve(graph, method) for method in METHODS]
+        except Hang:
+            read, solves = ("hang", []) if not solves else (read, [*solves, "hang"])
         except EgncError:
             read = "clean error"
         except Exception:  # noqa: BLE001 - the class of failure is the finding
             read = "crash"
-        if read == "graph":
-            solves = [_solve(graph, method) for method in METHODS]
     return Outcome(operator, read, solves, stdout=bool(output[0]))
 
 
@@ -185,6 +265,8 @@ def _solve(graph: egnc.PoseGraph, method: str) -> str:
         return "solver error"
     except Exception:  # noqa: BLE001
         return "crash"
+    if graph.fixed.all():
+        return "nothing to optimize" if result.status == NOTHING_TO_OPTIMIZE else "converged with nothing to solve"
     if not (np.isfinite(result.graph.poses).all() and np.isfinite(result.residual_norms).all()):
         return "solver failure reported" if result.status == 5 else "non-finite result"
     try:
@@ -197,24 +279,29 @@ def _solve(graph: egnc.PoseGraph, method: str) -> str:
 def fuzz(cases: int, seed: int) -> list[Outcome]:
     """Run `cases` mutants, cycling over the source texts, from one seed."""
     rng = random.Random(seed)
-    texts = list(source_texts().values())
+    sources = list(source_texts().items())
     outcomes = []
     with tempfile.TemporaryDirectory() as folder:
         for case in range(cases):
-            operator, mutant = mutate(texts[case % len(texts)], rng)
-            outcomes.append(run_case(mutant, operator, Path(folder)))
+            name, text = sources[case % len(sources)]
+            irl = name.endswith(".irl")
+            operator, mutant = mutate(text, rng, irl=irl)
+            outcomes.append(run_case(mutant, operator, Path(folder), irl=irl))
     return outcomes
 
 
 def bad(outcome: Outcome) -> list[str]:
     """The bug classes of one outcome (empty when it behaved)."""
-    found = [outcome.read] if outcome.read == "crash" else []
+    found = [outcome.read] if outcome.read in BAD_OUTCOMES else []
     found += [solve for solve in outcome.solves if solve in BAD_OUTCOMES]
     return found + (["stdout output"] if outcome.stdout else [])
 
 
-READ_CLASSES = ("graph", "clean error", "crash")
-SOLVE_CLASSES = ("finite", "solver error", "solver failure reported", "non-finite result", "invalid JSON", "crash")
+READ_CLASSES = ("graph", "clean error", "accepted invalid", "crash", "hang")
+SOLVE_CLASSES = (
+    "finite", "nothing to optimize", "solver error", "solver failure reported", "non-finite result",
+    "converged with nothing to solve", "invalid JSON", "crash", "hang",
+)  # fmt: skip
 
 
 def table(outcomes: list[Outcome]) -> str:
@@ -227,20 +314,45 @@ def table(outcomes: list[Outcome]) -> str:
             counts[f"read: {outcome.read}"] += 1
             counts.update(f"solve: {solve}" for solve in outcome.solves)
             counts["stdout"] += outcome.stdout
-    lines = ["| operator | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
-    for operator in [*sorted(set(rows) - {"**all**"}), "**all**"]:
-        lines.append(f"| {operator} | " + " | ".join(str(rows[operator][c]) for c in columns) + " |")
+    return counts_table(rows, columns, "operator")
+
+
+def counts_table(rows: dict[str, collections.Counter], columns: list[str], first: str = "kind") -> str:
+    """Markdown table of per-row class counts (`first` heads the row names), rows sorted, `**all**` last."""
+    lines = [f"| {first} | " + " | ".join(columns) + " |", "|---" * (len(columns) + 1) + "|"]
+    for name in [*sorted(set(rows) - {"**all**"}), "**all**"]:
+        lines.append(f"| {name} | " + " | ".join(str(rows[name][c]) for c in columns) + " |")
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
+    import fuzz_api
+    import fuzz_options
+
+    targets: dict[str, Callable[[int, int], tuple[str, int]]] = {
+        "files": _files_target,
+        "options": fuzz_options.run_target,
+        "api": fuzz_api.run_target,
+    }
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", type=int, default=2000, help="number of mutants (default 2000)")
+    parser.add_argument("--target", choices=[*targets, "all"], default="files", help="what to fuzz (default files)")
+    parser.add_argument("--cases", type=int, default=2000, help="number of cases per target (default 2000)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     args = parser.parse_args(argv)
-    outcomes = fuzz(args.cases, args.seed)
-    print(table(outcomes))
-    return 1 if any(bad(outcome) for outcome in outcomes) else 0
+    failed = False
+    for name in targets if args.target == "all" else [args.target]:
+        started = time.perf_counter()
+        text, bugs = targets[name](args.cases, args.seed)
+        print(f"### {name}: {args.cases} cases, seed {args.seed}, {time.perf_counter() - started:.0f} s, {bugs} bugs")
+        print(f"\n{text}\n", flush=True)
+        failed |= bugs > 0
+    return 1 if failed else 0
+
+
+def _files_target(cases: int, seed: int) -> tuple[str, int]:
+    """The mutated-files target: its table and the number of cases that are bugs."""
+    outcomes = fuzz(cases, seed)
+    return table(outcomes), sum(bool(bad(outcome)) for outcome in outcomes)
 
 
 if __name__ == "__main__":

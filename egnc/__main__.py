@@ -2,6 +2,6 @@
 
 import sys
 
-from egnc.cli.solve import main
+from egnc.cli.launch import solve
 
-sys.exit(main())
+sys.exit(solve())

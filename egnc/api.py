@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from egnc.checks import check_callable, check_choice, check_instance
 from egnc.chordal import chordal_initialization
 from egnc.decision import decide_outliers, truncated_cost
 from egnc.diagnostics import solve_warnings
-from egnc.errors import EgncError, GraphError
+from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
     GncOptions,
@@ -26,7 +28,14 @@ from egnc.graph import PoseGraph
 from egnc.health import check_representable
 from egnc.initialize import initialize_poses
 from egnc.io import read_g2o
-from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
+from egnc.least_squares import (
+    NOTHING_TO_OPTIMIZE,
+    NUMERICAL_FAILURE,
+    STATUS_MESSAGES,
+    IterationCallback,
+    Problem,
+    SolverOptions,
+)
 from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
@@ -191,17 +200,31 @@ def solve(
 
     Raises:
         NumericalError: the graph cannot be solved in double precision (`egnc.health`).
+        OptionError: an argument has the wrong type or value (e.g. `GncOptions` given as
+            `options`); it names the argument.
+
+    A graph whose poses are all fixed has nothing to optimize: it is returned unchanged with
+    status 6 (`NOTHING_TO_OPTIMIZE`, not "converged"), every edge accepted, and a warning.
     """
     started = time.perf_counter()
-    options = options or SolverOptions()
-    gnc_options = gnc_options or GncOptions()
+    check_choice("method", method, METHODS)
+    check_choice("init", init, INITIALIZATIONS)
+    options = SolverOptions() if options is None else options
+    gnc_options = GncOptions() if gnc_options is None else gnc_options
+    check_instance("options", options, SolverOptions)
+    check_instance("gnc_options", gnc_options, GncOptions)
+    check_callable("on_stage", on_stage)
+    check_callable("on_iteration", on_iteration)
     if not isinstance(graph, PoseGraph):
+        check_instance("graph", graph, (str, os.PathLike), "a PoseGraph or a g2o file path")
         graph = read_g2o(graph)
     known = known_inlier_mask(graph, known_inliers)
     robust = ~known
     backend = resolve_name(linear_solver)
     factors = BetweenFactors.from_graph(graph)
     check_representable(graph)
+    if graph.fixed.all():
+        return _nothing_to_optimize(graph, method, known, backend, factors, init, started, gnc_options)
     graph = graph.with_poses(initial_guess(graph, init, known, backend))
     initial = to_matrices(graph.dim, graph.poses)
     initial_r = factors.whitened_norms(factors.residuals(initial))
@@ -296,6 +319,47 @@ def _truncated_cost(
     return truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, options.outlier_quantile)
 
 
+def _nothing_to_optimize(
+    graph: PoseGraph,
+    method: str,
+    known: np.ndarray,
+    backend: str,
+    factors: BetweenFactors,
+    init: str,
+    started: float,
+    gnc_options: GncOptions,
+) -> Result:
+    """The `Result` of a graph whose poses are all fixed: the graph unchanged, no stage run, a warning."""
+    r = factors.whitened_norms(factors.residuals(to_matrices(graph.dim, graph.poses)))
+    cost = float(0.5 * np.sum(r**2))
+    return Result(
+        graph=graph,
+        method=method,
+        linear_solver=backend,
+        residual_norms=r,
+        weights=np.ones(graph.num_edges),
+        mu=np.full(graph.num_edges, np.nan),
+        known_inliers=known,
+        inliers=np.ones(graph.num_edges, dtype=bool),
+        initial_cost=cost,
+        cost=cost,
+        accepted_cost=cost,
+        truncated_cost=truncated_cost(r, ~known, graph.tangent_dim, gnc_options.outlier_quantile),
+        iterations=0,
+        stages=(),
+        status=NOTHING_TO_OPTIMIZE,
+        message=STATUS_MESSAGES[NOTHING_TO_OPTIMIZE],
+        time_s=time.perf_counter() - started,
+        timings={},
+        robust_residual_norms=r,
+        warnings=(
+            f"all {graph.num_poses} poses are fixed: there is nothing to optimize; the graph is returned "
+            "unchanged and no edge is rejected",
+        ),
+        init=init,
+    )
+
+
 def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = None) -> np.ndarray:
     """Marginal covariances of chosen poses of a solve, from the information of its accepted edges.
 
@@ -313,13 +377,24 @@ def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = No
 
     Raises:
         GraphError: an id is not a vertex of the graph.
+        OptionError: `result` is not a `Result`, or `ids` not a 1-D sequence of integers.
     """
+    check_instance("result", result, Result)
     graph = result.graph
+    if ids is not None:
+        try:
+            requested = np.asarray(ids)
+        except ValueError:  # ragged nesting
+            requested = np.asarray(None)
+        if requested.dtype.kind not in "iu" or requested.ndim > 1:
+            raise OptionError(f"ids must be a vertex id or a 1-D sequence of them (integers), got {ids!r:.60}")
     ids = graph.vertex_ids if ids is None else np.asarray(ids, dtype=np.int64).reshape(-1)
     rows = np.searchsorted(graph.vertex_ids, ids)
     rows = np.minimum(rows, graph.num_poses - 1)
     missing = ids[graph.vertex_ids[rows] != ids]
     if len(missing):
         raise GraphError(f"marginal_covariances: no vertex with id {missing[:5].tolist()}")
+    if graph.fixed.all():  # no unknowns: every covariance is zero
+        return np.zeros((len(rows), graph.tangent_dim, graph.tangent_dim))
     problem = Problem.from_graph(graph.subgraph_edges(result.inliers), result.linear_solver)
     return pose_covariances(problem, to_matrices(graph.dim, graph.poses), rows)

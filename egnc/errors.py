@@ -37,6 +37,14 @@ class NumericalError(SolverError):
     """The problem cannot be represented in double precision, or the solve produced non-finite numbers."""
 
 
+class OptionError(EgncError, ValueError):
+    """An option field or a function argument has a value out of its range; the message names it."""
+
+
+class OptionTypeError(OptionError, TypeError):
+    """An option field or a function argument has the wrong type; the message names it."""
+
+
 class EgncWarning(UserWarning):
     """Something the user should know about an input egnc accepted (repaired, skipped or held fixed).
 

@@ -24,6 +24,7 @@ from typing import Literal
 
 import numpy as np
 
+from egnc.checks import check_bool, check_choice, check_float, check_int
 from egnc.errors import EgncError
 from egnc.factors import BetweenFactors
 from egnc.graph import PoseGraph
@@ -86,6 +87,9 @@ class GncOptions:
             decrease falls below `max(this, SolverOptions.rel_cost_tol)` (GTSAM's GNC uses
             1e-5); IRLS converges linearly, so a tight tolerance only costs iterations there.
             The refinement then converges to the caller's tolerance.
+
+    Every field is checked at construction (bools must be bools, `max_stages` an int, the
+    numbers finite); a wrong type or value raises `OptionError` naming the field.
     """
 
     c: float = 3.0
@@ -102,16 +106,21 @@ class GncOptions:
     stage_rel_cost_tol: float = 1e-6
 
     def __post_init__(self) -> None:
+        """Check every field's type and range (`egnc.checks`), storing plain Python values."""
+        checked: dict[str, object] = {
+            "c": check_float("GncOptions.c", self.c, 0.0, open_low=True),
+            "max_stages": check_int("GncOptions.max_stages", self.max_stages, 1),
+            "stage_rel_cost_tol": check_float("GncOptions.stage_rel_cost_tol", self.stage_rel_cost_tol, 0.0),
+        }
         for name in ("threshold", "outlier_threshold"):
-            if getattr(self, name) not in ("squared", "distance"):
-                raise EgncError(f"unknown {name} {getattr(self, name)!r}: choose 'squared' or 'distance'")
+            checked[name] = check_choice(f"GncOptions.{name}", getattr(self, name), ("squared", "distance"))
         for name in ("outlier_quantile", "readmit_quantile"):
-            if not 0.0 < getattr(self, name) < 1.0:
-                raise EgncError(f"{name} must be in (0, 1), got {getattr(self, name)}")
-        if self.c <= 0:
-            raise EgncError(f"the kernel shape c must be positive, got {self.c}")
-        if self.max_stages < 1:
-            raise EgncError(f"max_stages must be at least 1, got {self.max_stages}")
+            value = getattr(self, name)
+            checked[name] = check_float(f"GncOptions.{name}", value, 0.0, 1.0, open_low=True, open_high=True)
+        for name in ("refine", "readmit", "warm_start", "chordal_start", "every_stage"):
+            checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
 
 
 StageKind = Literal["gnc", "decision", "probe"]

@@ -12,11 +12,19 @@ egnc's tangent vectors (`[v, omega]`), so no permutation is ever applied.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from egnc.errors import GraphError
+from egnc.errors import GraphError, OptionError
+from egnc.validity import (
+    NO_EDGES,
+    first_bad_quaternion,
+    first_self_edge,
+    not_positive_definite,
+    not_positive_definite_message,
+)
 
 POSE_SIZE = {2: 3, 3: 7}
 """Number of stored parameters per pose, by spatial dimension."""
@@ -33,6 +41,47 @@ _DTYPES = {
     "fixed": bool,
     "edge_lines": np.int64,
 }
+
+
+_OWNED: weakref.WeakValueDictionary[int, np.ndarray] = weakref.WeakValueDictionary()
+"""The arrays `PoseGraph` holds, by `id`: read-only views of private copies, so no caller can make them
+writable again (`setflags(write=True)` is refused on a view of a read-only array). Being immutable
+and already checked, they are shared by the graphs derived from one another (`with_poses`,
+`dataclasses.replace`) instead of being copied and checked again."""
+
+
+def _private_copy(name: str, value: object, dtype: type) -> np.ndarray:
+    """A read-only view of a new copy of `value` as `dtype`: its base is not the caller's array.
+
+    Raises:
+        GraphError: `value` holds something other than numbers, or non-integers for an integer
+            field (NumPy would truncate 1.5 to 1 without a word).
+    """
+    try:
+        source = np.asarray(value)
+        if np.issubdtype(dtype, np.integer) and source.dtype.kind == "f" and not np.all(np.mod(source, 1) == 0):
+            raise ValueError("not integers")
+        copy: np.ndarray = np.array(source, dtype=dtype)
+    except (TypeError, ValueError):
+        kind = "integers" if np.issubdtype(dtype, np.integer) else "bools" if dtype is bool else "numbers"
+        raise GraphError(f"{name} must be an array of {kind}, got {_describe(value)}") from None
+    copy.setflags(write=False)
+    view = copy.view()
+    _OWNED[id(view)] = view
+    return view
+
+
+def _describe(value: object) -> str:
+    """A short description of a value for an error message (never a whole array)."""
+    if isinstance(value, np.ndarray):
+        return f"an array of dtype {value.dtype} and shape {value.shape}"
+    text = repr(value)
+    return text if len(text) <= 40 else f"a {type(value).__name__}"
+
+
+def _is_owned(value: object) -> bool:
+    """Whether `value` is an array some `PoseGraph` made with `_private_copy`."""
+    return isinstance(value, np.ndarray) and _OWNED.get(id(value)) is value
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,6 +102,12 @@ class PoseGraph:
         unknown_lines: lines of the source file with tags egnc does not read (landmarks,
             parameters, ...), verbatim, kept by `read_g2o(skip_unknown=True)` so that
             `write_g2o` writes them back.
+
+    The constructor checks what the readers check (`egnc.validity`, same wording, naming the edge
+    index): at least one edge, no edge from a vertex to itself, positive-definite information,
+    normalizable measurement quaternions; and unique sorted ids, shapes, edge rows in range. It
+    raises `GraphError`. The arrays are read-only views of private copies, so neither the
+    caller's arrays nor the graph can be changed through the other.
     """
 
     dim: int
@@ -66,18 +121,20 @@ class PoseGraph:
     unknown_lines: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if self.dim not in POSE_SIZE:
-            raise GraphError(f"dim must be 2 or 3, got {self.dim}")
+        if isinstance(self.dim, bool) or not isinstance(self.dim, (int, np.integer)) or self.dim not in POSE_SIZE:
+            raise GraphError(f"dim must be 2 or 3, got {_describe(self.dim)}")
+        object.__setattr__(self, "dim", int(self.dim))
         p, d = POSE_SIZE[self.dim], TANGENT_SIZE[self.dim]
-        n = len(self.vertex_ids)
-        e = len(self.edges)
-        if self.fixed is None:
-            object.__setattr__(self, "fixed", np.zeros(n, dtype=bool))
-        if self.edge_lines is None:
-            object.__setattr__(self, "edge_lines", np.zeros(e, dtype=np.int64))
-        # Own read-only copies, so a caller's arrays are never frozen or aliased.
-        for name, dtype in _DTYPES.items():
-            object.__setattr__(self, name, np.array(getattr(self, name), dtype=dtype))
+        given = {name for name in _DTYPES if name not in ("fixed", "edge_lines") or getattr(self, name) is not None}
+        new = {name for name in given if not _is_owned(getattr(self, name))}
+        for name in new:
+            object.__setattr__(self, name, _private_copy(name, getattr(self, name), _DTYPES[name]))
+        n = len(self.vertex_ids) if self.vertex_ids.ndim else 0
+        e = len(self.edges) if self.edges.ndim else 0
+        if "fixed" not in given:
+            object.__setattr__(self, "fixed", _private_copy("fixed", np.zeros(n), bool))
+        if "edge_lines" not in given:
+            object.__setattr__(self, "edge_lines", _private_copy("edge_lines", np.zeros(e), np.int64))
         expected = {
             "vertex_ids": (n,),
             "poses": (n, p),
@@ -91,11 +148,35 @@ class PoseGraph:
             actual = np.shape(getattr(self, name))
             if actual != shape:
                 raise GraphError(f"{name} has shape {actual}, expected {shape}")
-        if e and (self.edges.min() < 0 or self.edges.max() >= n):
-            raise GraphError("edges refer to vertex rows outside [0, N)")
-        for name in _DTYPES:
-            getattr(self, name).setflags(write=False)
+        self._check_edges(new)
         object.__setattr__(self, "unknown_lines", tuple(map(str, self.unknown_lines)))
+
+    def _check_edges(self, new: set[str]) -> None:
+        """The reader's checks (`egnc.validity`), on the arrays not already checked by another graph."""
+        if not self.num_edges:
+            raise GraphError(f"no edges: {NO_EDGES}")
+        if "vertex_ids" in new and np.any(np.diff(self.vertex_ids) <= 0):
+            raise GraphError("vertex_ids must be sorted ascending and unique")
+        if self.edges.min() < 0 or self.edges.max() >= self.num_poses:
+            raise GraphError("edges refer to vertex rows outside [0, N)")
+        found = first_self_edge(self.vertex_ids[self.edges])
+        if found:
+            raise GraphError(f"edge {found[0]}: {found[1]}")
+        if self.dim == 3 and "measurements" in new:
+            found = first_bad_quaternion(self.measurements[:, 3:7])
+            if found:
+                raise GraphError(f"edge {found[0]}: measurement {found[1]}")
+        if "information" in new:
+            bad = not_positive_definite(self.information)
+            if len(bad):
+                raise GraphError(f"edge {bad[0]}: {not_positive_definite_message(self.information, bad)}")
+
+    def __repr__(self) -> str:
+        """Sizes only: the arrays of a real graph would fill the screen."""
+        return (
+            f"PoseGraph(dim={self.dim}, poses={self.num_poses}, edges={self.num_edges},"
+            f" loop_closures={int(np.count_nonzero(self.is_loop_closure))}, fixed={int(np.count_nonzero(self.fixed))})"
+        )
 
     @property
     def num_poses(self) -> int:
@@ -136,11 +217,20 @@ class PoseGraph:
 
     def with_poses(self, poses: np.ndarray) -> PoseGraph:
         """Return a copy of the graph with new poses `(N, P)`, e.g. an optimized trajectory."""
-        return replace(self, poses=np.array(poses, dtype=np.float64))
+        return replace(self, poses=poses)
 
     def subgraph_edges(self, keep: np.ndarray) -> PoseGraph:
-        """Return a copy with only the edges where `keep` `(E,)` bool is true (poses unchanged)."""
-        keep = np.asarray(keep, dtype=bool)
+        """Return a copy with only the edges where `keep` `(E,)` bool is true (poses unchanged).
+
+        Raises:
+            OptionError: `keep` is not an `(E,)` bool mask.
+            GraphError: no edge is kept.
+        """
+        keep = np.asarray(keep)
+        if keep.dtype != bool or keep.shape != (self.num_edges,):
+            raise OptionError(
+                f"keep must be a bool mask of shape ({self.num_edges},), got dtype {keep.dtype} and shape {keep.shape}"
+            )
         return replace(
             self,
             edges=self.edges[keep],

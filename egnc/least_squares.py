@@ -39,6 +39,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from egnc.checks import check_choice, check_float, check_int
 from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.graph import PoseGraph
@@ -53,9 +54,12 @@ STATUS_MESSAGES = {
     3: "converged: step below step_tol",
     4: "stopped: no step decreases the cost",
     5: "numerical failure: the cost or the gradient is not finite",
+    6: "nothing to optimize: every pose is fixed",
 }
 NUMERICAL_FAILURE = 5
 """Status of a solve stopped by non-finite numbers (`egnc.health` refuses most such inputs earlier)."""
+NOTHING_TO_OPTIMIZE = 6
+"""Status of `egnc.solve` on a graph whose poses are all fixed: it is returned unchanged."""
 CONVERGED = (1, 2, 3)
 
 IterationCallback = Callable[[int, float], None]
@@ -97,13 +101,17 @@ class SolverOptions:
         rel_cost_tol: stop when `(F_prev - F) / F_prev <= rel_cost_tol` after an accepted step.
         gradient_tol: stop when the largest gradient component `max |g| <= gradient_tol`.
         step_tol: stop when the step's Euclidean norm `||delta|| <= step_tol`.
-        initial_damping: LM's starting `lambda` (Ceres: 1 / initial trust-region radius 1e4).
-        max_damping: LM gives up (status 4) when `lambda` exceeds this.
+        initial_damping: LM's starting `lambda` (Ceres: 1 / initial trust-region radius 1e4), in
+            `(0, max_damping]`.
+        max_damping: LM gives up (status 4) when `lambda` exceeds this; positive and finite.
         linear_method: how each step's linear system is solved (`egnc.step_solver`): `"auto"`
             (conjugate gradients preconditioned by the Cholesky factorization of the edges
             whose weight is at least `trust_weight`, when some edge is below it; else direct)
             or `"direct"` (one factorization of every edge).
-        trust_weight: the IRLS weight from which an edge is in the preconditioner.
+        trust_weight: the IRLS weight from which an edge is in the preconditioner, in `(0, 1]`.
+
+    The tolerances are finite and `>= 0`, `max_iterations` an int `>= 0`. Every field is checked
+    at construction; a wrong type or value raises `OptionError` naming the field.
     """
 
     method: Literal["lm", "gn"] = "lm"
@@ -117,14 +125,23 @@ class SolverOptions:
     trust_weight: float = 1e-4
 
     def __post_init__(self) -> None:
-        if self.method not in ("lm", "gn"):
-            raise SolverError(f"unknown method {self.method!r}: choose 'lm' or 'gn'")
-        if self.linear_method not in LINEAR_METHODS:
-            raise SolverError(f"unknown linear_method {self.linear_method!r}: choose 'auto' or 'direct'")
-        if not 0.0 < self.trust_weight <= 1.0:
-            raise SolverError(f"trust_weight must be in (0, 1], got {self.trust_weight}")
-        if self.max_iterations < 0:
-            raise SolverError(f"max_iterations must be >= 0, got {self.max_iterations}")
+        """Check every field's type and range (`egnc.checks`), storing plain Python values."""
+        max_damping = check_float("SolverOptions.max_damping", self.max_damping, 0.0, open_low=True)
+        checked: dict[str, object] = {
+            "max_damping": max_damping,
+            "method": check_choice("SolverOptions.method", self.method, ("lm", "gn")),
+            "max_iterations": check_int("SolverOptions.max_iterations", self.max_iterations, 0),
+            "linear_method": check_choice("SolverOptions.linear_method", self.linear_method, LINEAR_METHODS),
+            "trust_weight": check_float("SolverOptions.trust_weight", self.trust_weight, 0.0, 1.0, open_low=True),
+        }
+        for name in ("rel_cost_tol", "gradient_tol", "step_tol"):
+            checked[name] = check_float(f"SolverOptions.{name}", getattr(self, name), 0.0)
+        # LM multiplies the damping, so it must start positive; above max_damping no step is ever tried.
+        checked["initial_damping"] = check_float(
+            "SolverOptions.initial_damping", self.initial_damping, 0.0, max_damping, open_low=True
+        )
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
 
 
 @dataclass(frozen=True, eq=False)

@@ -78,6 +78,23 @@ def require_matplotlib() -> None:
         raise EgncError(f"plotting needs matplotlib, which is not installed: {INSTALL_HINT}") from None
 
 
+def figure_format(path: str | Path) -> str:
+    """The file format a figure at `path` is written in: its suffix, `png` without one.
+
+    Raises:
+        EgncError: matplotlib is missing, or cannot write that format.
+    """
+    require_matplotlib()
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    path = Path(path)
+    file_format = path.suffix[1:].lower() or "png"
+    supported = FigureCanvasBase.get_supported_filetypes()
+    if file_format not in supported:
+        raise EgncError(f"{path}: cannot write figures as {file_format!r}; use one of {', '.join(sorted(supported))}")
+    return file_format
+
+
 def plot_trajectory(
     result_or_graph: Result | PoseGraph,
     *,
@@ -433,13 +450,9 @@ def save_figure(figure: Figure, path: str | Path, *, dpi: float = 100) -> Path:
         EgncError: matplotlib is missing, `dpi` is not positive, the format is unknown, or the file
             cannot be written.
     """
-    require_matplotlib()
     dpi = _positive_finite("dpi", dpi)
     path = Path(path)
-    file_format = path.suffix[1:].lower() or "png"
-    supported = figure.canvas.get_supported_filetypes()
-    if file_format not in supported:
-        raise EgncError(f"{path}: cannot write figures as {file_format!r}; use one of {', '.join(sorted(supported))}")
+    file_format = figure_format(path)
     # Line art compresses much better with zlib's best effort (Pillow's `optimize`).
     options: dict[str, Any] = {"pil_kwargs": {"optimize": True}} if file_format == "png" else {}
     with atomic_binary_file(path) as out:
@@ -536,6 +549,11 @@ def _draw_path(ax: Axes, position: np.ndarray, **style) -> None:
 
 def _add_segments(ax: Axes, segments: np.ndarray, **style) -> None:
     """One line collection of `(K, 2, 2|3)` segments (one artist however many edges)."""
+    if segments.shape[-1] == 3 and not len(segments):
+        # matplotlib cannot draw a Line3DCollection of no segments (a ValueError from np.concatenate
+        # when the figure is saved): an empty line keeps the legend entry instead.
+        ax.plot([], [], [], **style)
+        return
     if segments.shape[-1] == 3:
         from mpl_toolkits.mplot3d.art3d import Line3DCollection
 

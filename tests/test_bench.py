@@ -66,7 +66,7 @@ def test_option_values_follow_the_field_types():
         ("foo", "unknown method 'foo'"),
         ("egnc[bar=1]", "unknown option 'bar'"),
         ("egnc[max_stages=x]", "not a valid int"),
-        ("egnc[c=-1]", "must be positive"),
+        ("egnc[c=-1]", r"GncOptions.c must be a finite number in \(0, inf\)"),
         ("egnc[threshold=abs]", "threshold"),
         ("egnc[c]", "not of the form name=value"),
         ("egnc[c=1,c=2]", "given twice"),

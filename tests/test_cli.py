@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -217,7 +218,8 @@ BAD_INPUTS = {
     "not_positive_definite": (VERTICES + "EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", ":3: information matrix is not positive"),
     "truncated": (VERTICES + GOOD_EDGE.rstrip("\n")[:-4], ":3: file looks truncated"),
     "disconnected": (VERTICES + GOOD_EDGE + GOOD_EDGE.replace("0 1 ", "5 6 ", 1), ": the pose graph is disconnected"),
-    "empty": ("# nothing here\n", ": no EDGE_SE2 or EDGE_SE3:QUAT lines"),
+    "empty": ("# nothing here\n", ": no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines"),
+    "huge_id": (VERTICES + GOOD_EDGE + f"FIX {'9' * 5000}\n", ":4: FIX field 1 is '9999"),
 }
 
 
@@ -283,3 +285,42 @@ def test_linear_method_changes_how_steps_are_solved_not_what_is_rejected(tmp_pat
     assert len(reports["auto"]["rejected_edges"]) > 0
     assert sum(stage["cg_iterations"] for stage in reports["auto"]["stages"]) > 0
     assert sum(stage["cg_iterations"] for stage in reports["direct"]["stages"]) == 0
+
+
+def test_endless_input_is_refused_at_once():
+    run = egnc_solve("/dev/zero")
+    assert_one_line_error(run, "/dev/zero:1: line longer than 1048576 bytes")
+
+
+ENDLESS_COMMENTS = """
+import sys, time
+written = 0
+while True:
+    sys.stdout.write("# endless\\n" * 10000)
+    sys.stdout.flush()
+    written += 100000
+    if written == 2_000_000:
+        print("flowing", file=sys.stderr, flush=True)  # far more than a pipe holds: the reader reads
+    time.sleep(0.01)
+"""
+
+
+def test_sigterm_ends_a_read_of_endless_input():
+    producer = subprocess.Popen(
+        [sys.executable, "-c", ENDLESS_COMMENTS], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    assert producer.stdout is not None and producer.stderr is not None
+    solver = subprocess.Popen(
+        [sys.executable, "-m", "egnc.cli.solve", "/dev/stdin"], stdin=producer.stdout, stderr=subprocess.PIPE, text=True
+    )
+    producer.stdout.close()
+    try:
+        assert producer.stderr.readline().strip() == "flowing"
+        solver.send_signal(signal.SIGTERM)
+        _, stderr = solver.communicate(timeout=60)  # before issue 19 the read ignored SIGTERM
+    finally:
+        solver.kill()
+        producer.kill()
+        producer.wait()
+    assert solver.returncode == 143, stderr
+    assert stderr.strip() == "egnc-solve: terminated (SIGTERM); no output written"

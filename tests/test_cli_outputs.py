@@ -78,16 +78,33 @@ def test_missing_output_directory_fails_before_the_solve_and_keeps_old_files(tmp
     assert out.read_text() == "old\n"
 
 
+FAILING_LAST_OUTPUT = """
+import egnc.cli.outputs as outputs
+from egnc.errors import EgncError
+def failing(*args, **kwargs):
+    raise EgncError("edges.csv: cannot write file: disk full")
+outputs.write_edges_csv = failing
+"""
+
+
 def test_failure_in_a_later_output_leaves_every_previous_file_untouched(tmp_path):
-    pytest.importorskip("matplotlib")
-    out, report = tmp_path / "out.g2o", tmp_path / "report.json"
+    out, report, edges = tmp_path / "out.g2o", tmp_path / "report.json", tmp_path / "edges.csv"
     out.write_text("old graph\n")
     report.write_text("old report\n")
-    # The figure format is checked when the figure is saved, after the graph and the report are written.
-    run = egnc_solve(GRID2D, "--method", "l2", "-q", "-o", out, "--report", report, "--plot", tmp_path / "t.xyz")
-    assert_one_line_error(run, "cannot write figures as 'xyz'")
+    # The edges CSV is written after the graph and the report.
+    args = ("--method", "l2", "-q", "-o", out, "--report", report, "--edges", edges)
+    run = run_with_stub(FAILING_LAST_OUTPUT, GRID2D, *args)
+    assert_one_line_error(finish(run), "edges.csv: cannot write file: disk full")
     assert (out.read_text(), report.read_text()) == ("old graph\n", "old report\n")
     assert sorted(path.name for path in tmp_path.iterdir()) == ["out.g2o", "report.json"]
+
+
+def test_unknown_figure_format_is_refused_before_reading(tmp_path):
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "out.g2o"
+    run = egnc_solve(tmp_path / "not_read.g2o", "-o", out, "--plot", tmp_path / "t.xyz")
+    assert_one_line_error(run, "t.xyz: cannot write figures as 'xyz'")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_stale_temporaries_of_dead_runs_are_removed(tmp_path):

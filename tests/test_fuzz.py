@@ -1,8 +1,10 @@
-"""Seeded fuzzing (benchmarks/fuzz.py): mutated real and generated g2o files never crash egnc.
+"""Seeded fuzzing (benchmarks/fuzz.py, fuzz_options.py, fuzz_api.py): a bounded quick version of each target.
 
-Reading a mutant gives a `PoseGraph` or an `EgncError`; solving an accepted one gives a result or
-an `EgncError`, a strict-JSON report, and nothing on stdout. `python benchmarks/fuzz.py` runs more
-cases and prints the table in RELIABILITY.md.
+Files: reading a mutant gives a `PoseGraph` or an `EgncError` (always the error for the invalid
+operators); solving an accepted one gives a result or an `EgncError`, a strict-JSON report, and
+nothing on stdout. Options: an invalid field value is refused at construction naming the field,
+valid ones solve. API: every misuse ends in a one-line `EgncError`. Nothing hangs.
+`python benchmarks/fuzz.py --target all` runs more cases and prints the tables in RELIABILITY.md.
 """
 
 from __future__ import annotations
@@ -15,8 +17,10 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
 import fuzz  # noqa: E402
+import fuzz_api  # noqa: E402
+import fuzz_options  # noqa: E402
 
-CASES = 240
+CASES = 300
 SEED = 11
 
 
@@ -35,7 +39,7 @@ def test_fuzz_exercises_every_operator_and_both_outcomes_of_reading(outcomes):
     assert sum(len(outcome.solves) for outcome in outcomes) > CASES // 2  # many mutants are solved
 
 
-def test_no_crash_no_stdout_no_invalid_json(outcomes, capfd):
+def test_no_crash_no_hang_no_stdout_no_invalid_json(outcomes, capfd):
     problems = [(k, outcome.operator, fuzz.bad(outcome)) for k, outcome in enumerate(outcomes)]
     problems = [(k, operator, found) for k, operator, found in problems if set(found) - {"non-finite result"}]
     assert problems == []
@@ -45,3 +49,51 @@ def test_no_crash_no_stdout_no_invalid_json(outcomes, capfd):
 def test_solutions_are_finite_or_a_reported_failure(outcomes):
     non_finite = [(k, outcome.operator) for k, outcome in enumerate(outcomes) if "non-finite result" in outcome.solves]
     assert non_finite == []
+
+
+def test_invalid_mutants_are_refused_and_fix_all_has_nothing_to_optimize(outcomes):
+    invalid = [outcome for outcome in outcomes if outcome.operator in fuzz.INVALID_OPERATORS]
+    assert invalid and all(outcome.read == "clean error" for outcome in invalid)
+    fixed = [outcome for outcome in outcomes if outcome.operator == "fix all" and outcome.read == "graph"]
+    assert fixed and all(solve == "nothing to optimize" for outcome in fixed for solve in outcome.solves)
+
+
+def test_time_limit_turns_a_hang_into_a_class():
+    with pytest.raises(fuzz.Hang), fuzz.time_limit(0.05):
+        while True:
+            pass
+
+
+def test_options_fuzz_refuses_every_invalid_value_and_solves_the_valid_ones():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        results = fuzz_options.fuzz_options(250, SEED)
+    outcomes = {case.outcome for case in results}
+    assert {"refused", "finite"} <= outcomes
+    assert [case for case in results if case.outcome in fuzz_options.BAD] == []
+    assert all(case.outcome == "refused" for case in results if case.invalid)
+    assert {name for case in results for name in case.fields} == set(fuzz_options.VALID)
+
+
+def test_options_pools_cover_every_field():
+    import dataclasses
+
+    import egnc
+
+    names = {field.name for options in (egnc.SolverOptions, egnc.GncOptions) for field in dataclasses.fields(options)}
+    assert set(fuzz_options.VALID) == set(fuzz_options.INVALID) == names
+
+
+def test_api_fuzz_every_misuse_is_a_one_line_egnc_error(tmp_path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        results = fuzz_api.fuzz_api(400, SEED, tmp_path)
+    assert {case.kind for case in results} == set(fuzz_api.misuses(*_api_arguments(tmp_path)))
+    assert [(case.kind, case.outcome) for case in results if case.outcome != "clean error"] == []
+
+
+def _api_arguments(tmp_path: Path) -> tuple:
+    import egnc
+
+    graph = fuzz_api._graph()
+    return graph, egnc.solve(graph, "l2"), tmp_path

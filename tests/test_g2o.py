@@ -273,7 +273,7 @@ def test_format_error_names_file_and_line(case, tmp_path):
 @pytest.mark.parametrize("text", ["", "# only a comment\n\n", V2 + V2B, "FIX 0\n"])
 def test_file_without_edges_is_an_error(text, tmp_path):
     path = write_text(tmp_path, text, name="empty.g2o")
-    with pytest.raises(G2oFormatError, match="no EDGE_SE2 or EDGE_SE3:QUAT lines") as caught:
+    with pytest.raises(G2oFormatError, match="no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines") as caught:
         read_g2o(path)
     assert str(caught.value).startswith(f"{path}: ")
 
@@ -321,7 +321,8 @@ def test_duplicates_are_repeats_of_an_unordered_pair():
     rng = np.random.default_rng(3)
     for _ in range(100):
         n = int(rng.integers(2, 12))
-        edges = rng.integers(0, n, size=(int(rng.integers(1, 40)), 2))
+        starts = rng.integers(0, n, size=int(rng.integers(1, 40)))
+        edges = np.stack((starts, (starts + rng.integers(1, n, size=len(starts))) % n), axis=1)  # no self-edge
         information = np.tile(np.eye(3), (len(edges), 1, 1))
         graph = PoseGraph(2, np.arange(n), np.zeros((n, 3)), edges, np.zeros((len(edges), 3)), information)
         seen: set[tuple[int, int]] = set()
@@ -578,3 +579,83 @@ def test_matches_gtsam_reader(name, dataset_path):
             np.testing.assert_allclose(
                 factor.measured().matrix(), se3.from_xyz_quat(graph.measurements[k]), atol=1e-12
             )
+
+
+# --- Issue 19: huge integers, byte-order marks, endless input, TORO records ----------------------
+
+HUGE = "1" * 5000  # Python's int() refuses more than 4300 digits with a ValueError of its own
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "field"),
+    [
+        (V2 + f"VERTEX_SE2 {HUGE} 1 0 0\n" + E2, 2, "VERTEX_SE2 field 1"),
+        (V2 + V2B + f"EDGE_SE2 0 -{HUGE} 1 0 0 {info_upper(3)}\n", 3, "EDGE_SE2 field 2"),
+        (V2 + V2B + E2 + f"FIX 0 {HUGE}\n", 4, "FIX field 2"),
+        (V2 + V2B + f"EDGE_SE2 0 {'0' * 4400}1 1 0 0 {info_upper(3)}\n" + f"FIX {HUGE}\n", 4, "FIX field 1"),
+    ],
+)
+def test_integers_beyond_the_digit_limit_are_a_one_line_error(tmp_path, text, line, field):
+    path = write_text(tmp_path, text)
+    with pytest.raises(G2oFormatError, match=f"{field} is .*characters[)], expected an integer") as info:
+        read_g2o(path)
+    assert (info.value.path, info.value.line) == (str(path), line)
+    assert len(str(info.value)) < 300  # the token is cut short in the message
+
+
+def test_leading_zeros_do_not_count_against_the_id_range(tmp_path):
+    graph = read_g2o(write_text(tmp_path, V2 + V2B + f"EDGE_SE2 0 {'0' * 4400}1 1 0 0 {info_upper(3)}\n"))
+    np.testing.assert_array_equal(graph.vertex_ids, [0, 1])
+
+
+def test_a_byte_order_mark_is_skipped(tmp_path):
+    path = tmp_path / "bom.g2o"
+    path.write_bytes(b"\xef\xbb\xbf" + (V2 + V2B + E2).encode())
+    assert_same_graph(read_g2o(path), read_g2o(write_text(tmp_path, V2 + V2B + E2)))
+
+
+def test_an_endless_line_is_refused_after_a_bounded_read(tmp_path):
+    import egnc.io.text as text_module
+
+    with pytest.raises(G2oFormatError, match="^/dev/zero:1: line longer than 1048576 bytes") as info:
+        read_g2o("/dev/zero")
+    assert info.value.line == 1
+    # A long line after good ones names its own line, and an invalid byte in a later block too.
+    path = tmp_path / "long.g2o"
+    path.write_bytes((V2 + V2B).encode() + b"# " + b"x" * (2 * text_module.MAX_LINE_BYTES + 5))
+    with pytest.raises(G2oFormatError, match="long.g2o:3: line longer"):
+        read_g2o(path)
+    path.write_bytes((V2 * 10).encode() + b"#" * (text_module.BLOCK_SIZE + 7) + b"\n\xff\n")
+    with pytest.raises(G2oFormatError, match="long.g2o:12: not a text file"):
+        read_g2o(path)
+
+
+def test_toro_records_read_as_gtsam_load2d_reads_them(tmp_path):
+    # TORO's information order is I11 I12 I22 I33 I13 I23 (x, y, theta).
+    toro = "VERTEX2 0 0 0 0\nVERTEX2 1 1 0.5 0.2\nEDGE2 0 1 1 0.5 0.2 11 1 22 33 2 3\n"
+    graph = read_g2o(write_text(tmp_path, toro, "toro.graph"))
+    expected = np.array([[11.0, 1.0, 2.0], [1.0, 22.0, 3.0], [2.0, 3.0, 33.0]])
+    np.testing.assert_array_equal(graph.information[0], expected)
+    np.testing.assert_array_equal(graph.measurements, [[1.0, 0.5, 0.2]])
+    np.testing.assert_array_equal(graph.poses, [[0.0, 0.0, 0.0], [1.0, 0.5, 0.2]])
+    # The same edge as EDGE_SE2 (g2o order), mixed with TORO lines in one file: file order is kept.
+    mixed = toro + "EDGE_SE2 1 0 -1 0 0 11 1 2 22 3 33\n" + "EDGE2 1 0 -1 0 0 11 1 22 33 2 3\n"
+    graph = read_g2o(write_text(tmp_path, mixed, "mixed.graph"))
+    np.testing.assert_array_equal(graph.information, np.stack([expected] * 3))
+    np.testing.assert_array_equal(graph.edges, [[0, 1], [1, 0], [1, 0]])
+    assert_same_graph(graph, read_g2o(write_text(tmp_path, mixed + "# comment: the line-by-line path\n")))
+
+
+def test_toro_information_matches_gtsam(tmp_path):
+    gtsam = pytest.importorskip("gtsam")
+    path = write_text(tmp_path, "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0.5 0.2 11 1 22 33 2 3\n", "t.graph")
+    factors, _ = gtsam.load2D(str(path), noiseFormat=gtsam.NoiseFormat.NoiseFormatTORO, smart=False)
+    R = factors.at(0).noiseModel().R()
+    np.testing.assert_allclose(read_g2o(path).information[0], R.T @ R, rtol=1e-12)
+
+
+def test_toro_errors_name_the_toro_tag(tmp_path):
+    with pytest.raises(G2oFormatError, match=":3: EDGE2 field 8 is nan, expected a finite number"):
+        read_g2o(write_text(tmp_path, "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1 0 nan 1 0 0\n"))
+    with pytest.raises(G2oFormatError, match=":1: EDGE2 needs 11 fields after the tag"):
+        read_g2o(write_text(tmp_path, "EDGE2 0 1 1 0 0 1 0 1 1 0\n"))

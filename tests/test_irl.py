@@ -195,6 +195,11 @@ BAD_INPUTS = {
     "unicode separator": (HEADER + f"ODOMETRY 1 0 0 1 1\u2028 0.0 0.0 {COV2}\n", 6, "character U[+]2028"),
     "no entries": (HEADER + f"PRIOR 1 0 0 0 0 0 {COV2}\n", None, "no ODOMETRY or LOOP"),
     "truncated": (HEADER + "ODOMETRY 1 0 0 1 1.0 0.0 0.0 0.1 0.0", 6, "truncated"),
+    # Issue 19: without its notes line the PRIOR was read as the notes, and the prior was lost.
+    "no notes line": (TINY.replace("some notes\n", ""), 5, "header line 5 [(]notes[)] is a PRIOR entry"),
+    "id over 4300 digits": (HEADER + f"ODOMETRY 1 0 0 {'7' * 5000} 1.0 0.0 0.0 {COV2}\n", 6, "5000 characters"),
+    "id above int64": (HEADER + f"ODOMETRY 1 0 0 9223372036854775808 1.0 0.0 0.0 {COV2}\n", 6, "int64 range"),
+    "mode count over 4300 digits": (HEADER + f"LOOP {'2' * 4400} 0 1 0 1.0 0.0 0.0 {COV2}\n", 6, "NUM_MODES"),
 }
 
 
@@ -217,3 +222,10 @@ def test_missing_file_and_odometry_gap(tmp_path):
     with pytest.raises(GraphError, match="odometry does not reach every pose") as info:
         read_irl(path)
     assert str(info.value).startswith(str(path))
+
+
+def test_a_byte_order_mark_is_skipped(tmp_path):
+    path = tmp_path / "bom.irl"
+    path.write_bytes(b"\xef\xbb\xbf" + TINY.encode())
+    log = read_irl(path)
+    assert log.name == "tiny" and log.prior is not None and log.num_edges == 5

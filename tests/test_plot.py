@@ -256,6 +256,46 @@ def test_cli_plot_writes_png(mpl, tmp_path):
     assert out.read_bytes()[:8] == PNG_SIGNATURE
 
 
+def test_3d_graph_without_loop_closures_plots(mpl, tmp_path):
+    # Issue 19: an empty Line3DCollection made savefig raise ValueError (need at least one array).
+    graph = egnc.read_g2o(DATASETS / "grid3d.g2o")
+    odometry_only = graph.subgraph_edges(graph.is_odometry)
+    figure = plot.plot_trajectory(egnc.solve(odometry_only, "l2"), initial=odometry_only)
+    path = plot.save_figure(figure, tmp_path / "odometry3d.png")
+    assert path.read_bytes()[:8] == PNG_SIGNATURE
+    labels = [handle.get_label() for handle in figure.legends[0].legend_handles if handle is not None]
+    assert "accepted loop closures (0)" in [text.get_text() for text in figure.legends[0].get_texts()], labels
+
+
+FAILING_PLOT = """
+import egnc.cli.outputs as outputs
+def broken(*args, **kwargs):
+    raise ValueError("need at least one array\\nto concatenate")
+outputs.plot_trajectory = broken
+"""
+
+
+def test_cli_failed_plot_is_a_warning_and_the_outputs_are_written(mpl, tmp_path):
+    out, report, png = tmp_path / "out.g2o", tmp_path / "report.json", tmp_path / "trajectory.png"
+    script = "import sys\nimport egnc.cli.solve as cli\n" + FAILING_PLOT + "\nsys.exit(cli.main(sys.argv[1:]))\n"
+    args = [str(DATASETS / "grid2d.g2o"), "--method", "l2", "-q", "-o", str(out), "--report", str(report)]
+    run = subprocess.run(
+        [sys.executable, "-c", script, *args, "--plot", str(png)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, "MPLBACKEND": "Agg"},
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stderr.splitlines() == [
+        f"warning: {png}: --plot failed, no figure written (ValueError: need at least one array to concatenate)"
+    ]
+    assert egnc.read_g2o(out).num_poses == egnc.read_g2o(DATASETS / "grid2d.g2o").num_poses
+    assert report.is_file() and not png.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.g2o", "report.json"]  # no temporary left
+
+
 def test_docs_figures_regenerate_small(mpl, tmp_path, capsys):
     pytest.importorskip("PIL")  # matplotlib's own dependency
     spec = importlib.util.spec_from_file_location("make_figures", DOCS / "make_figures.py")

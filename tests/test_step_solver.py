@@ -7,7 +7,7 @@ import pytest
 
 from egnc.api import solve
 from egnc.datasets import add_false_loops, grid_world
-from egnc.errors import SolverError
+from egnc.errors import OptionError
 from egnc.factors import to_matrices
 from egnc.kernels import make_kernel
 from egnc.least_squares import Problem, SolverOptions
@@ -97,7 +97,7 @@ def test_robust_solves_are_the_same_with_either_linear_method(corrupted, backend
 
 
 def test_linear_method_options_are_checked():
-    with pytest.raises(SolverError, match="linear_method"):
+    with pytest.raises(OptionError, match="linear_method"):
         SolverOptions(linear_method="cg")  # type: ignore[arg-type]
-    with pytest.raises(SolverError, match="trust_weight"):
+    with pytest.raises(OptionError, match="trust_weight"):
         SolverOptions(trust_weight=0.0)

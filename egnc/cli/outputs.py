@@ -1,9 +1,10 @@
 """The output files of `egnc-solve`: checked before anything is read, written all or nothing.
 
 Before reading the input, every output path is checked: it must not be the input file, nor the
-path of another output, and its directory must exist and be writable. After the solve, all
+path of another output, and its directory must exist and be writable. After the solve, the data
 outputs are written to temporaries and renamed together (`egnc.io.atomic.all_or_nothing`), so a
-failure in any of them leaves every previous file untouched.
+failure in any of them leaves every previous file untouched, except the `--plot` figure: drawn
+last, its failure is a warning and the other outputs are still written.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from egnc.io import write_g2o
 from egnc.io.atomic import all_or_nothing, atomic_text_file
 from egnc.io.edges_csv import write_edges_csv
 from egnc.io.trajectory import TrajectoryFormat, trajectory_format, write_trajectory
-from egnc.plot import plot_trajectory, require_matplotlib, save_figure
+from egnc.plot import figure_format, plot_trajectory, save_figure
 
 
 @dataclass(frozen=True)
@@ -66,7 +67,7 @@ class OutputPlan:
         Raises:
             EgncError: an output is the input file or another output's file, is a directory, or
                 its directory is missing or not writable; the trajectory format is unknown; or
-                `--plot` is asked for without matplotlib.
+                `--plot` is asked for without matplotlib or in a format it cannot write.
         """
         paths = self.paths()
         for k, (option, path) in enumerate(paths):
@@ -79,10 +80,14 @@ class OutputPlan:
         if self.trajectory is not None:
             trajectory_format(self.trajectory, self.trajectory_format)
         if self.plot is not None:
-            require_matplotlib()
+            figure_format(self.plot)
 
-    def write(self, result: Result, initial: PoseGraph, report: dict) -> list[Path]:
-        """Write every output, all or nothing; returns the paths written.
+    def write(self, result: Result, initial: PoseGraph, report: dict) -> tuple[list[Path], list[str]]:
+        """Write every output; returns the paths written and a warning per output that failed.
+
+        All outputs are written all or nothing, the figure last; but a figure matplotlib cannot
+        draw must not lose the solve, so its failure is a one-line warning, and the other files
+        are written without it.
 
         Args:
             result: the solve.
@@ -95,13 +100,22 @@ class OutputPlan:
             if self.report is not None:
                 with atomic_text_file(self.report) as out:
                     out.write(json.dumps(report, indent=2, allow_nan=False) + "\n")
-            if self.plot is not None:
-                save_figure(plot_trajectory(result, initial=initial, size=self.plot_size), self.plot, dpi=self.dpi)
             if self.trajectory is not None:
                 write_trajectory(result.graph, self.trajectory, self.trajectory_format)
             if self.edges is not None:
                 write_edges_csv(result, self.edges)
-        return [path for _, path in self.paths()]
+            notes = self._write_plot(result, initial) if self.plot is not None else []
+        return [path for option, path in self.paths() if option != "--plot" or not notes], notes
+
+    def _write_plot(self, result: Result, initial: PoseGraph) -> list[str]:
+        """Draw and save the figure; a failure is returned as a one-line warning, not raised."""
+        assert self.plot is not None
+        try:
+            save_figure(plot_trajectory(result, initial=initial, size=self.plot_size), self.plot, dpi=self.dpi)
+        except Exception as error:  # noqa: BLE001 - any failure of the drawing library: the data is kept
+            reason = " ".join(str(error).split()) or "no message"
+            return [f"{self.plot}: --plot failed, no figure written ({type(error).__name__}: {reason})"]
+        return []
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -232,7 +232,9 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
     _require_finite(result, args.input)
     report = report_dict(result, read_notes + _warning_notes(caught[read_count:]))
     _print_warnings(report["warnings"][len(read_notes) :])  # the solve's, the result's, the report's
-    return result, plan.write(result, graph, report)
+    written, output_notes = plan.write(result, graph, report)
+    _print_warnings(output_notes)
+    return result, written
 
 
 def _warning_notes(caught: list[warnings.WarningMessage]) -> list[str]:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from egnc.errors import EgncError, G2oFormatError
-from egnc.io.numbers import check_line_characters, is_integer
+from egnc.io.numbers import check_line_characters, parse_id, shown
 from egnc.io.text import read_text
 
 
@@ -46,7 +46,8 @@ def read_known_inliers(path: str | os.PathLike, num_edges: int) -> np.ndarray:
         if problem:
             raise G2oFormatError(problem, path, number)
         for token in line.split():
-            if not is_integer(token) or not 0 <= int(token) < num_edges:
-                raise G2oFormatError(f"{token!r} is not an edge index in [0, {num_edges})", path, number)
-            known[int(token)] = True
+            index = parse_id(token)
+            if index is None or not 0 <= index < num_edges:
+                raise G2oFormatError(f"{shown(token)} is not an edge index in [0, {num_edges})", path, number)
+            known[index] = True
     return known

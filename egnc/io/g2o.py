@@ -8,6 +8,12 @@ ignored; numbers follow the grammar of `egnc.io.numbers`:
 - `VERTEX_SE3:QUAT id x y z qx qy qz qw`
 - `EDGE_SE3:QUAT i j dx dy dz qx qy qz qw` + 21 information entries
 - `FIX id [id ...]`
+- TORO's 2D records, as GTSAM's `load2D` reads them: `VERTEX2 id x y theta`, and
+  `EDGE2 i j dx dy dtheta I11 I12 I22 I33 I13 I23`: the information matrix in TORO's order
+  (`inf_ff inf_fs inf_ss inf_rr inf_fr inf_sr`; GTSAM's `NoiseFormatTORO`, checked against the
+  gtsam 4.3 wheel). GTSAM's default `NoiseFormatAUTO` instead guesses a covariance from some
+  zero patterns; egnc follows TORO's definition. `write_g2o` writes them as `VERTEX_SE2` and
+  `EDGE_SE2`.
 
 Information matrices are given as their upper triangle, row-major, ordered translation-then-rotation
 (`x y theta` in 2D, `x y z rx ry rz` in 3D). Values are stored exactly as read: angles are not
@@ -31,19 +37,22 @@ from typing import NoReturn
 
 import numpy as np
 
+from egnc.checks import check_bool, check_choice, check_instance
 from egnc.connectivity import describe_ids, hold_isolated_fixed, isolated_vertices, require_connected
-from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
+from egnc.errors import EgncWarning, G2oFormatError, GraphError, OptionError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
-from egnc.io.information import INFORMATION_MODES, InformationMode, not_positive_definite, repair_information
-from egnc.io.numbers import check_line_characters, is_float, is_integer, parse_floats, parse_integers
+from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
+from egnc.io.numbers import check_line_characters, is_float, parse_floats, parse_id, parse_integers, shown
 from egnc.io.text import read_text
-
-_MIN_QUATERNION_NORM = 1e-6
-"""Quaternions shorter than this are treated as corrupt rather than normalized."""
-
-_INT64_MAX = np.iinfo(np.int64).max
+from egnc.validity import (
+    NO_EDGES,
+    first_bad_quaternion,
+    first_self_edge,
+    not_positive_definite,
+    not_positive_definite_message,
+)
 
 
 @dataclass(frozen=True)
@@ -56,6 +65,7 @@ class _Tag:
     num_ids: int
     num_values: int
     layout: str
+    toro: bool = False
 
     @property
     def num_fields(self) -> int:
@@ -73,7 +83,13 @@ _EDGE_TAGS = {
         "EDGE_SE3:QUAT", "edge", 3, 2, 7 + 21, "i j dx dy dz qx qy qz qw and 21 information entries"
     ),
 }
-_TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values())}
+_TORO_TAGS = (
+    _Tag("VERTEX2", "vertex", 2, 1, 3, "id x y theta", toro=True),
+    _Tag("EDGE2", "edge", 2, 2, 3 + 6, "i j dx dy dtheta I11 I12 I22 I33 I13 I23", toro=True),
+)
+_TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values(), *_TORO_TAGS)}
+_TORO_TO_G2O_UPPER = np.array([0, 1, 4, 2, 5, 3])
+"""TORO's `I11 I12 I22 I33 I13 I23` to g2o's row-major upper triangle `I11 I12 I13 I22 I23 I33`."""
 _FIX = "FIX"
 _TAG_NAME = re.compile(r"[A-Z][A-Z0-9_:]*", re.IGNORECASE)
 """What a record tag looks like (`VERTEX_XY`, `PARAMS_SE3OFFSET`, ...): anything else is damage, never skipped."""
@@ -130,9 +146,11 @@ def read_g2o(
     Raises:
         G2oFormatError: the file cannot be read or is malformed; names the file and line.
         GraphError: the file is well formed but its graph is disconnected.
+        OptionError: an argument has the wrong type or value.
     """
-    if information not in INFORMATION_MODES:
-        raise EgncError(f"information must be one of {', '.join(INFORMATION_MODES)}, got {information!r}")
+    check_instance("path", path, (str, os.PathLike), "a g2o file path (str or os.PathLike)")
+    check_bool("skip_unknown", skip_unknown)
+    check_choice("information", information, INFORMATION_MODES)
     path = Path(path)
     text = read_text(path)
     lines = text.split("\n")
@@ -140,7 +158,7 @@ def read_g2o(
     split = _split_plain_records(lines) if _NOT_PLAIN_TEXT.search(text) is None else None
     dim, vertices, edges, fixes, unknown = split or _split_records(lines, context, skip_unknown)
     if dim is None or not edges.rows:
-        raise context.error("no EDGE_SE2 or EDGE_SE3:QUAT lines: a pose graph needs edges")
+        raise context.error(f"no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
 
     notes = [_describe_skipped(path, unknown)] if unknown else []
     vertex_tag, edge_tag = _VERTEX_TAGS[dim], _EDGE_TAGS[dim]
@@ -151,10 +169,15 @@ def read_g2o(
     edge_lines = np.asarray(edges.lines, dtype=np.int64)
     p, d = POSE_SIZE[dim], TANGENT_SIZE[dim]
     measurements = edge_values[:, :p]
-    information_matrices = _information_from_upper(edge_values[:, p:], d)
+    upper = edge_values[:, p:]
+    toro = np.fromiter((row[0] == "EDGE2" for row in edges.rows), dtype=bool, count=len(edges.rows))
+    if toro.any():
+        upper = upper.copy()
+        upper[toro] = upper[toro][:, _TORO_TO_G2O_UPPER]
+    information_matrices = _information_from_upper(upper, d)
 
-    _check_finite(vertex_values, vertex_lines, vertex_tag, 1 + vertex_tag.num_ids, context)
-    _check_finite(edge_values, edge_lines, edge_tag, 1 + edge_tag.num_ids, context)
+    _check_finite(vertex_values, vertices, 1 + vertex_tag.num_ids, context)
+    _check_finite(edge_values, edges, 1 + edge_tag.num_ids, context)
     if dim == 3:
         _check_quaternions(vertex_values[:, 3:7], vertex_lines, context)
         _check_quaternions(measurements[:, 3:7], edge_lines, context)
@@ -219,12 +242,15 @@ def write_g2o(
             vertices are written regardless.
 
     Raises:
-        ValueError: `keep_edges` is not an `(E,)` boolean mask.
+        OptionTypeError: `graph` is not a `PoseGraph` or `path` not a path (e.g. the two swapped).
+        OptionError: `keep_edges` is not an `(E,)` boolean mask (a `ValueError` too).
         GraphError: the graph holds non-finite values, which no reader would accept.
     """
+    check_instance("graph", graph, PoseGraph)
+    check_instance("path", path, (str, os.PathLike), "a file path (str or os.PathLike)")
     keep = np.ones(graph.num_edges, dtype=bool) if keep_edges is None else np.asarray(keep_edges)
     if keep.dtype != bool or keep.shape != (graph.num_edges,):
-        raise ValueError(
+        raise OptionError(
             f"keep_edges must be a boolean mask of shape ({graph.num_edges},), "
             f"got dtype {keep.dtype} and shape {keep.shape}"
         )
@@ -272,12 +298,12 @@ def _split_records(
                 fixes.rows.append(fields)
                 fixes.lines.append(line_number)
             elif not _TAG_NAME.fullmatch(name):
-                raise context.error(f"line starts with {name!r}, which is not a record tag", line_number)
+                raise context.error(f"line starts with {shown(name)}, which is not a record tag", line_number)
             elif skip_unknown:
                 unknown.append(raw_line)
             else:
                 raise context.error(
-                    f"unknown tag {name!r}; "
+                    f"unknown tag {shown(name)}; "
                     "pass skip_unknown=True / --skip-unknown to skip such lines (they are written back with -o)",
                     line_number,
                 )
@@ -328,9 +354,12 @@ def _split_plain_records(lines: list[str]) -> tuple[int | None, _Records, _Recor
         if (min(lengths) < 2) if name == _FIX else (lengths != {1 + _TAGS[name].num_fields}):
             return None
         grouped[name] = group
+    kinds = [_TAGS[name].kind for name in names - {_FIX}]
+    if len(kinds) != len(set(kinds)):  # g2o and TORO records of one kind: their file order is the loop's job
+        return None
     empty = _Records([], [])
-    vertices = grouped.get(_VERTEX_TAGS[dim].name, empty) if dim else empty
-    edges = grouped.get(_EDGE_TAGS[dim].name, empty) if dim else empty
+    vertices = next((grouped[name] for name in names - {_FIX} if _TAGS[name].kind == "vertex"), empty)
+    edges = next((grouped[name] for name in names - {_FIX} if _TAGS[name].kind == "edge"), empty)
     return dim, vertices, edges, grouped.get(_FIX, empty), []
 
 
@@ -362,53 +391,39 @@ def _raise_first_bad_field(records: _Records, tag: _Tag, context: _Context) -> N
     for row, line_number in zip(records.rows, records.lines):
         for position, token in enumerate(row[1:], start=1):
             if position <= tag.num_ids:
-                _parse_id(token, tag.name, position, line_number, context)
+                _parse_id(token, row[0], position, line_number, context)
             elif not is_float(token):
-                raise context.error(
-                    f"{tag.name} field {position} is {token!r}, expected a number", line_number
-                )
+                raise context.error(f"{row[0]} field {position} is {shown(token)}, expected a number", line_number)
     raise AssertionError("no bad field found")
 
 
 def _parse_id(token: str, tag_name: str, position: int, line_number: int, context: _Context) -> int:
-    """Parse one vertex id, raising for its line unless it is an int64 integer."""
-    if not is_integer(token) or abs(int(token)) > _INT64_MAX:
+    """Parse one vertex id, raising for its line unless it is an int64 integer (`parse_id`)."""
+    value = parse_id(token)
+    if value is None:
         raise context.error(
-            f"{tag_name} field {position} is {token!r}, expected an integer vertex id", line_number
+            f"{tag_name} field {position} is {shown(token)}, expected an integer vertex id in the int64 range",
+            line_number,
         )
-    return int(token)
+    return value
 
 
-def _check_finite(
-    values: np.ndarray, lines: np.ndarray, tag: _Tag, first_field: int, context: _Context
-) -> None:
-    """Reject NaN and infinite values, naming the first offending line and field."""
+def _check_finite(values: np.ndarray, records: _Records, first_field: int, context: _Context) -> None:
+    """Reject NaN and infinite values, naming the first offending line, tag and field."""
     bad = ~np.isfinite(values)
     if bad.any():
         row, column = np.argwhere(bad)[0]
         raise context.error(
-            f"{tag.name} field {first_field + column} is {values[row, column]}, "
-            "expected a finite number",
-            int(lines[row]),
+            f"{records.rows[row][0]} field {first_field + column} is {values[row, column]}, expected a finite number",
+            records.lines[row],
         )
 
 
 def _check_quaternions(quaternions: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject quaternions that cannot be normalized in double precision (stored values are kept as read).
-
-    Too short (norm below `_MIN_QUATERNION_NORM`, most likely corrupt) or so long that the sum of
-    squares overflows (a component above about 1e154).
-    """
-    with np.errstate(over="ignore"):
-        norms = np.sqrt(np.einsum("ij,ij->i", quaternions, quaternions))
-    bad = np.flatnonzero(~(norms >= _MIN_QUATERNION_NORM) | ~np.isfinite(norms))
-    if len(bad):
-        k = bad[0]
-        problem = "too small" if norms[k] < _MIN_QUATERNION_NORM else "too large (overflows a double)"
-        raise context.error(
-            f"quaternion (qx qy qz qw) = {quaternions[k].tolist()} has a norm {problem} to normalize",
-            int(lines[k]),
-        )
+    """Reject quaternions that cannot be normalized (`egnc.validity`); stored values are kept as read."""
+    found = first_bad_quaternion(quaternions)
+    if found:
+        raise context.error(found[1], int(lines[found[0]]))
 
 
 def _check_unique_vertices(vertex_ids: np.ndarray, lines: np.ndarray, context: _Context) -> None:
@@ -427,12 +442,10 @@ def _check_unique_vertices(vertex_ids: np.ndarray, lines: np.ndarray, context: _
 
 
 def _check_no_self_edges(edge_ids: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject an edge from a vertex to itself (it measures nothing)."""
-    bad = np.flatnonzero(edge_ids[:, 0] == edge_ids[:, 1])
-    if len(bad):
-        raise context.error(
-            f"edge joins vertex {edge_ids[bad[0], 0]} to itself", int(lines[bad[0]])
-        )
+    """Reject an edge from a vertex to itself (`egnc.validity`)."""
+    found = first_self_edge(edge_ids)
+    if found:
+        raise context.error(found[1], int(lines[found[0]]))
 
 
 def _positive_definite(
@@ -447,13 +460,11 @@ def _positive_definite(
     bad = not_positive_definite(information)
     if not len(bad):
         return information, None
-    share = f"{len(bad)} of the file's {len(information)} edges are affected"
     if mode == "strict":
-        k = bad[0]
         raise context.error(
-            f"information matrix is not positive definite (diagonal {np.diagonal(information[k]).tolist()}); "
-            f"{share}; --information nearest-pd or diagonal (information= in read_g2o) repairs them",
-            int(lines[k]),
+            f"{not_positive_definite_message(information, bad)}; "
+            "--information nearest-pd or diagonal (information= in read_g2o) repairs them",
+            int(lines[bad[0]]),
         )
     information, still_bad, repair = repair_information(information, bad, mode)
     if len(still_bad):

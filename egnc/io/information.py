@@ -18,28 +18,13 @@ from typing import Literal
 
 import numpy as np
 
+from egnc.validity import not_positive_definite
+
 InformationMode = Literal["strict", "nearest-pd", "diagonal"]
 INFORMATION_MODES: tuple[InformationMode, ...] = ("strict", "nearest-pd", "diagonal")
 
 NEAREST_PD_FLOOR = 1e-6
 """Smallest eigenvalue after `nearest-pd`, relative to the largest: a condition number of 1e6."""
-
-
-def not_positive_definite(matrices: np.ndarray) -> np.ndarray:
-    """Indices of the `(K, d, d)` symmetric matrices that are not numerically positive definite.
-
-    A matrix fails when an entry is not finite, or its smallest eigenvalue is not above
-    `d * eps` times its largest one (below that it is roundoff, not data).
-    """
-    d = matrices.shape[-1]
-    finite = np.isfinite(matrices).all(axis=(1, 2))
-    eigenvalues = np.zeros(matrices.shape[:2])
-    with np.errstate(all="ignore"):  # entries near the overflow limit give inf/NaN eigenvalues: they fail
-        eigenvalues[finite] = np.linalg.eigvalsh(matrices[finite])
-        scale = np.abs(eigenvalues).max(axis=1)
-        # Written as "not above" so that a NaN eigenvalue also fails.
-        singular = ~(eigenvalues[:, 0] > d * np.finfo(float).eps * scale)
-    return np.flatnonzero(~finite | singular)
 
 
 @dataclass(frozen=True)
@@ -64,7 +49,7 @@ def repair_information(
 
     Args:
         information: `(E, d, d)` symmetric matrices, finite.
-        bad: indices from `not_positive_definite` (non-empty).
+        bad: indices from `egnc.validity.not_positive_definite` (non-empty).
         mode: `"nearest-pd"` or `"diagonal"` (see the module docstring).
 
     Returns:

@@ -52,15 +52,16 @@ from pathlib import Path
 
 import numpy as np
 
+from egnc.checks import check_instance
 from egnc.connectivity import connected_components, describe_components, require_connected
 from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
-from egnc.io.information import not_positive_definite
-from egnc.io.numbers import check_line_characters, format_floats, is_float, is_integer
+from egnc.io.numbers import check_line_characters, format_floats, is_float, parse_id, shown
 from egnc.io.text import read_text
 from egnc.lie import so3
+from egnc.validity import not_positive_definite
 
 __all__ = ["IrlLog", "IrlPrior", "read_irl", "write_irl"]
 
@@ -71,6 +72,7 @@ IRL_POSE_SIZE = {2: 3, 3: 6}
 """Numbers per pose in an IRL file: `x y theta` or `x y z rx ry rz`."""
 
 _NULL = "NULL"
+_ENTRY_TAGS = ("PRIOR", "ODOMETRY", "LOOP")
 _GTSAM_TO_EGNC_3D = np.array([3, 4, 5, 0, 1, 2])
 """Index map from GTSAM's Pose3 tangent order `(rx, ry, rz, x, y, z)` to egnc's `(x, y, z, rx, ry, rz)`."""
 
@@ -242,6 +244,7 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
         GraphError: the entries are well formed but do not make a solvable graph (a pose not
             reached by odometry, a covariance that is not positive definite).
     """
+    check_instance("path", path, (str, os.PathLike), "an IRL file path (str or os.PathLike)")
     path = Path(path)
     text = read_text(path)
     lines = text.split("\n")
@@ -254,14 +257,7 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
             path,
         )
     name, date, dim_text, linearity, notes = (line.strip() for line in lines[:HEADER_LINES])
-    if dim_text not in ("2", "3"):
-        raise G2oFormatError(f"pose dimension (header line 3) must be 2 or 3, got {dim_text!r}", path, 3)
-    if linearity != "nonlinear":
-        raise G2oFormatError(
-            f"linearity (header line 4) is {linearity!r}: egnc reads 'nonlinear' logs (poses, not points)",
-            path,
-            4,
-        )
+    _check_header(path, dim_text, linearity, notes)
     dim = int(dim_text)
     parser = _EntryParser(path, dim, cut_line=len(lines) if not text.endswith("\n") else None)
     for number, line in enumerate(lines[HEADER_LINES:], start=HEADER_LINES + 1):
@@ -294,12 +290,38 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
         raise GraphError(f"{path}: {error}") from None
 
 
+def _check_header(path: Path, dim_text: str, linearity: str, notes: str) -> None:
+    """Refuse a header that is not exactly the five lines, e.g. one without its notes line.
+
+    Without the check, a file whose notes line is missing reads its PRIOR entry as the notes and
+    loses the prior without a word.
+    """
+    if dim_text not in ("2", "3"):
+        raise G2oFormatError(f"pose dimension (header line 3) must be 2 or 3, got {shown(dim_text)}", path, 3)
+    if linearity != "nonlinear":
+        raise G2oFormatError(
+            f"linearity (header line 4) is {shown(linearity)}: egnc reads 'nonlinear' logs (poses, not points)",
+            path,
+            4,
+        )
+    first_word = notes.split(maxsplit=1)[0] if notes else ""
+    if first_word in _ENTRY_TAGS:
+        raise G2oFormatError(
+            f"header line 5 (notes) is a {first_word} entry: the IRL header has {HEADER_LINES} lines "
+            "(name, date, pose dimension, linearity, notes); add the notes line, even empty",
+            path,
+            5,
+        )
+
+
 def write_irl(log: IrlLog, path: str | os.PathLike) -> None:
     """Write an `IrlLog` as IRL text, atomically: the file is complete or untouched.
 
     The header, then the PRIOR (if any), then one ODOMETRY or LOOP line per edge in order. Floats
     are written with `repr`, so `read_irl` gives back bit-identical arrays.
     """
+    check_instance("log", log, IrlLog)
+    check_instance("path", path, (str, os.PathLike), "a file path (str or os.PathLike)")
     lines = [log.name, log.date, str(log.dim), "nonlinear", log.notes]
     if log.prior is not None:
         prior = log.prior
@@ -351,8 +373,8 @@ class _EntryParser:
         if not fields:
             return
         tag = fields[0]
-        if tag not in ("PRIOR", "ODOMETRY", "LOOP"):
-            raise self.error(f"unknown entry tag {tag!r}: expected PRIOR, ODOMETRY or LOOP", number)
+        if tag not in _ENTRY_TAGS:
+            raise self.error(f"unknown entry tag {shown(tag)}: expected PRIOR, ODOMETRY or LOOP", number)
         if len(fields) < 3:
             raise self.error(f"{tag} needs NUM_MODES and CORRECT_MODE after the tag", number)
         modes = self.integer(fields, 1, "NUM_MODES", number)
@@ -390,7 +412,7 @@ class _EntryParser:
         layout = f"a, b, {pose}, the {d}x{d} covariance" + (" and NULL" if null else "")
         self.count(fields, 4 + k + null, layout, f"LOOP with {modes} modes", number)
         if null and fields[-1] != _NULL:
-            raise self.error(f"LOOP mode 1 is {fields[-1]!r}: egnc reads NULL as the second mode", number)
+            raise self.error(f"LOOP mode 1 is {shown(fields[-1])}: egnc reads NULL as the second mode", number)
         self.add(fields[: len(fields) - null], number, odometry=False, null=null, outlier=correct == 1)
 
     def single_mode(self, tag: str, modes: int, number: int) -> None:
@@ -418,10 +440,11 @@ class _EntryParser:
         self.lines.append(number)
 
     def integer(self, fields: list[str], position: int, what: str, number: int) -> int:
-        value = int(fields[position]) if is_integer(fields[position]) else -1
-        if value < 0 or value > np.iinfo(np.int64).max:
+        value = parse_id(fields[position])
+        if value is None or value < 0:
             raise self.error(
-                f"{fields[0]} field {position} ({what}) is {fields[position]!r}, expected a non-negative integer",
+                f"{fields[0]} field {position} ({what}) is {shown(fields[position])}, "
+                "expected a non-negative integer in the int64 range",
                 number,
             )
         return value
@@ -429,7 +452,7 @@ class _EntryParser:
     def floats(self, fields: list[str], start: int, number: int) -> list[float]:
         for position, token in enumerate(fields[start:], start=start):
             if not is_float(token):
-                raise self.error(f"{fields[0]} field {position} is {token!r}, expected a number", number)
+                raise self.error(f"{fields[0]} field {position} is {shown(token)}, expected a number", number)
         values = [float(token) for token in fields[start:]]
         for position, value in enumerate(values, start=start):
             if not np.isfinite(value):

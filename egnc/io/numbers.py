@@ -29,6 +29,9 @@ _FLOAT_RE = re.compile(FLOAT)
 _INTEGER_RE = re.compile(INTEGER)
 _NOT_PLAIN_FLOAT = re.compile(r"[^0-9.eE+\-,]")
 _NOT_PLAIN_INTEGER = re.compile(r"[^0-9\-,]")
+_INT64_MIN, _INT64_MAX = int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max)
+_INT64_DIGITS = len(str(_INT64_MAX))
+_SHOWN_CHARACTERS = 40
 _FORBIDDEN_CHARACTER = re.compile(r"[^\t\x20-\x7e]")
 """Anything but printable ASCII and tab: other whitespace (`\\x1c`, `\\u2028`, ...) and controls."""
 
@@ -41,6 +44,28 @@ def is_float(token: str) -> bool:
 def is_integer(token: str) -> bool:
     """Whether the token is an integer by the grammar above (range not checked)."""
     return _INTEGER_RE.fullmatch(token) is not None
+
+
+def parse_id(token: str) -> int | None:
+    """The token as an int64 vertex id, or None when it is not an integer by the grammar or out of range.
+
+    The digits are counted before `int()` is called: Python refuses to convert more than 4300
+    digits (a `ValueError` of its own), and an int64 has at most 19 anyway.
+    """
+    if not is_integer(token):
+        return None
+    digits = token.lstrip("-").lstrip("0")
+    if len(digits) > _INT64_DIGITS:
+        return None
+    value = int(digits or "0") * (-1 if token.startswith("-") else 1)
+    return value if _INT64_MIN <= value <= _INT64_MAX else None
+
+
+def shown(token: str) -> str:
+    """The token quoted for an error message, cut short when long (a message stays one short line)."""
+    if len(token) <= _SHOWN_CHARACTERS:
+        return repr(token)
+    return f"{token[:_SHOWN_CHARACTERS]!r}... ({len(token)} characters)"
 
 
 def parse_floats(tokens: list[str]) -> np.ndarray | None:
@@ -69,8 +94,9 @@ def parse_integers(tokens: list[str]) -> np.ndarray | None:
             return None
     try:
         return np.array(tokens, dtype=np.int64)
-    except (ValueError, OverflowError):
-        return None
+    except (ValueError, OverflowError):  # out of range, or over 4300 digits (leading zeros included)
+        values = [parse_id(token) for token in tokens]
+        return None if None in values else np.array(values, dtype=np.int64)
 
 
 def _plain(tokens: list[str], not_plain: re.Pattern[str]) -> bool:
