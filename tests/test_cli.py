@@ -31,8 +31,9 @@ PROGRESS_LINE = re.compile(
     r" [\d.]+ s \(elapsed [\d.]+ s\)$"
 )
 STAGE_KEYS = {
-    "mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges", "cg_iterations", "kind", "start"
-}
+    "mu_min", "mu_mean", "mu_max", "iterations", "cost", "time_s", "status", "active_edges", "cg_iterations",
+    "kind", "start",
+}  # fmt: skip
 
 
 def egnc_solve(*args: str | Path, cwd: Path | None = None) -> subprocess.CompletedProcess:
