@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 import egnc
 from egnc.api import marginal_covariances, solve
+from egnc.cli.report import summary
 from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import truncated_cost
+from egnc.diagnostics import solve_warnings
 from egnc.factors import to_matrices
 from egnc.gnc import GncOptions
 from egnc.graph import PoseGraph
@@ -85,3 +89,29 @@ def test_manhattan_with_a_noisy_heading_keeps_every_loop(dataset_path):
     assert len(result.rejected_edges) == 0 and result.start == "chordal"
     assert result.cost == pytest.approx(solve(graph, "l2", init="chordal").cost, rel=1e-6)
     assert len(solve(graph, gnc_options=GUESS_ONLY).rejected_edges) > 0
+
+
+def test_loops_the_two_starts_dispute_and_an_unsettled_decision_are_warnings():
+    graph = grid_world(2, 200, seed=6).graph
+    result = solve(graph)
+    r = result.residual_norms
+    robust = ~result.known_inliers
+    disputed = np.zeros(graph.num_edges, dtype=bool)
+    disputed[np.flatnonzero(robust)[[3, 7]]] = True
+    fits = np.ones(graph.num_edges, dtype=bool)
+    quiet = solve_warnings(graph, result.stages, robust, result.inliers, r, r, fits, result.graph.poses)
+    warned = solve_warnings(
+        graph, result.stages, robust, result.inliers, r, r, fits, result.graph.poses, settled=False, disputed=disputed
+    )
+    assert quiet == ()
+    assert any("did not settle" in warning for warning in warned)
+    edges = ", ".join(str(k) for k in np.flatnonzero(disputed))
+    assert any(f"2 rejected loop closures (edges {edges})" in warning for warning in warned)
+
+
+def test_the_summary_never_says_converged_alone_when_there_are_warnings():
+    graph = grid_world(2, 200, seed=6).graph
+    result = solve(graph)
+    assert result.warnings == () and "read them" not in summary(result, [])
+    warned = dataclasses.replace(result, warnings=("something to check",))
+    assert "converged" in warned.message and "warnings: 1, read them" in summary(warned, [])
