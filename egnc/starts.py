@@ -122,6 +122,7 @@ def chordal_decision(
         on_stage(report)
     if cost(probe.poses) >= target:
         return None, (report,)
+
     def relay(round_report: StageReport) -> None:
         if on_stage is not None:
             on_stage(replace(round_report, start="chordal"))
