@@ -109,3 +109,41 @@ def test_online_replay_of_a_g2o_file_keeps_file_edge_order(tmp_path):
 def test_options_that_cannot_apply_are_refused(options, message):
     run = egnc_solve(DATASETS / "grid2d.g2o", *options)
     assert run.returncode == 1 and message in run.stderr
+
+
+def _run_until(args: list[str | Path], kill_at_step: int) -> int:
+    """Start `egnc-solve args`, SIGKILL it once its progress reports step `kill_at_step` or later; its exit code."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "egnc.cli.solve", *map(str, args)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+    )
+    assert process.stderr is not None
+    for line in process.stderr:
+        if line.startswith("step ") and int(line.split()[1].split("/")[0]) >= kill_at_step:
+            process.kill()
+            break
+    process.stderr.close()
+    return process.wait(timeout=300)
+
+
+def test_a_killed_replay_resumes_to_the_uninterrupted_result(tmp_path):
+    source = DATASETS / "grid2d_outliers.g2o"
+    whole_out, whole_report = tmp_path / "whole.g2o", tmp_path / "whole.json"
+    run = egnc_solve(source, "--online", "-o", whole_out, "--report", whole_report, "-q")
+    assert run.returncode == 0, run.stderr
+
+    checkpoint, out, report = tmp_path / "run.ckpt", tmp_path / "out.g2o", tmp_path / "report.json"
+    args = [source, "--online", "-o", out, "--report", report, "--checkpoint", checkpoint, "--checkpoint-every", "20"]
+    # Progress lines come every tenth of the 499 steps: kill after the 2nd, then (resumed) the 6th.
+    assert _run_until(args, 98) == -9 and checkpoint.exists() and not out.exists()
+    assert _run_until(args, 294) == -9 and not out.exists()
+    run = egnc_solve(*args)
+    assert run.returncode == 0, run.stderr
+    online = json.loads(report.read_text())["online"]
+    assert 280 <= online["resumed_from"] < 499 and online["steps"] == 499
+    np.testing.assert_allclose(egnc.read_g2o(out).poses, egnc.read_g2o(whole_out).poses, atol=1e-9, rtol=0)
+    assert json.loads(report.read_text())["rejected_edges"] == json.loads(whole_report.read_text())["rejected_edges"]
+    assert online["iterations"] == json.loads(whole_report.read_text())["online"]["iterations"]
