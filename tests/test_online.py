@@ -15,7 +15,7 @@ from egnc.factors import from_matrices, group_of, to_matrices
 from egnc.graph import PoseGraph
 from egnc.linear_solvers import cholmod_available
 from egnc.metrics import precision_recall
-from egnc.online import OnlineSolver
+from egnc.online import OnlineOptions, OnlineSolver
 from egnc.replay import replay, replay_steps
 
 DATA = Path(__file__).parents[1] / "datasets"
@@ -93,9 +93,10 @@ def test_odometry_between_known_poses_is_solved_without_graduation():
     assert solver.residual_norms[-1] > 0.1 and solver.rejected.size == 0
 
 
-def _chain(method: str, linear_solver: str = "auto") -> tuple[OnlineSolver, np.ndarray]:
+def _chain(method: str, linear_solver: str = "auto", regraduate: str = "new") -> tuple[OnlineSolver, np.ndarray]:
     """Eleven poses along x, 1 m apart; the x variance between pose 0 and 10 is 0.01 m^2 by odometry."""
-    solver = OnlineSolver(2, method, linear_solver=linear_solver)
+    options = OnlineOptions(regraduate=regraduate)  # type: ignore[arg-type]
+    solver = OnlineSolver(2, method, linear_solver=linear_solver, online_options=options)
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(10):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
@@ -103,9 +104,10 @@ def _chain(method: str, linear_solver: str = "auto") -> tuple[OnlineSolver, np.n
     return solver, np.diag([100.0, 1e4, 1e4])  # loops: x standard deviation 0.1 m
 
 
+@pytest.mark.parametrize("regraduate", ["new", "reference"])
 @pytest.mark.parametrize("method", ["egnc", "risam"])
-def test_a_loop_rejected_early_comes_back_when_later_loops_support_it(method):
-    solver, information = _chain(method)
+def test_a_loop_rejected_early_comes_back_when_later_loops_support_it(method, regraduate):
+    solver, information = _chain(method, regraduate=regraduate)
     first = solver.add_loop(0, 10, [10.85, 0.0, 0.0], information)
     solver.update()
     assert first in solver.rejected  # alone it disagrees with the odometry: r^2 about 70
@@ -122,9 +124,10 @@ def test_a_loop_rejected_early_comes_back_when_later_loops_support_it(method):
     assert solver.result().inliers.all()
 
 
+@pytest.mark.parametrize("regraduate", ["new", "reference"])
 @pytest.mark.parametrize("method", ["egnc", "risam"])
-def test_a_false_loop_accepted_early_leaves_when_true_loops_arrive(method):
-    solver, _ = _chain(method)
+def test_a_false_loop_accepted_early_leaves_when_true_loops_arrive(method, regraduate):
+    solver, _ = _chain(method, regraduate=regraduate)
     information = np.diag([400.0, 1e4, 1e4])  # x standard deviation 0.05 m, half the odometry's
     false = solver.add_loop(0, 10, [10.3, 0.0, 0.0], information)
     solver.update()
