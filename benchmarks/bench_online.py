@@ -2,7 +2,7 @@
 
     python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
-        [--regraduate new|reference] [--linear-solver auto] [--json results.jsonl]
+        [--regraduate reference|new] [--linear-solver auto] [--json results.jsonl]
 
 For every dataset and percentage, the clean graph's least-squares optimum is the reference; the
 graph is corrupted with riSAM-protocol false loops (`egnc.datasets.add_false_loops`, seeded) and
@@ -112,7 +112,7 @@ def main() -> int:
     parser.add_argument("--methods", default="egnc,risam")
     parser.add_argument("--irl", default="manhattan_noisy", help="IRL logs (names in the datasets folder); '' for none")
     parser.add_argument("--stage-iterations", type=int, default=1, help="0: every stage converges")
-    parser.add_argument("--regraduate", default="new", choices=("new", "reference"))
+    parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
     parser.add_argument("--linear-solver", default="auto")
     parser.add_argument("--json", type=Path, help="append one JSON line per row here")
     args = parser.parse_args()
