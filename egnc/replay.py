@@ -102,7 +102,8 @@ def replay(
         checkpoint: a file to write the state to, and to resume from when it exists.
         checkpoint_every: steps between two checkpoint writes (and one after the last step).
         stop_after: stop after this many steps in all (for tests of interrupted runs); the
-            checkpoint is written, and the result is that of the steps done.
+            checkpoint is written, and the result is that of the steps done, its edges in
+            insertion (replay) order.
         on_step: called after every update with `(step, total_steps, report)`.
 
     Raises:
