@@ -127,16 +127,22 @@ def test_a_loop_rejected_early_comes_back_when_later_loops_support_it(method, re
 @pytest.mark.parametrize("regraduate", ["reference", "new"])
 @pytest.mark.parametrize("method", ["egnc", "risam"])
 def test_a_false_loop_accepted_early_leaves_when_true_loops_arrive(method, regraduate):
-    solver, _ = _chain(method, regraduate=regraduate)
-    information = np.diag([400.0, 1e4, 1e4])  # x standard deviation 0.05 m, half the odometry's
-    false = solver.add_loop(0, 10, [10.3, 0.0, 0.0], information)
+    # The odometry says pose 10 is at x = 10 m; the truth (and the true loops) say 9.8 m.
+    solver, true_information = _chain(method, regraduate=regraduate)
+    false_information = np.diag([400.0, 1e4, 1e4])  # x standard deviation 0.05 m
+    false = solver.add_loop(0, 10, [10.1, 0.0, 0.0], false_information)
     solver.update()
-    assert false not in solver.rejected  # alone it fits within the odometry's uncertainty (r^2 about 7)
-    for _ in range(3):
-        solver.add_loop(0, 10, [10.0, 0.0, 0.0], information)
+    assert false not in solver.rejected  # at arrival it fits the odometry (r^2 = 4)
+    left = None
+    for k in range(8):
+        solver.add_loop(0, 10, [9.8, 0.0, 0.0], true_information)
         solver.update()
+        if left is None and false in solver.rejected:
+            left = k
+    assert left is not None and left >= 1, "the false loop must leave, and not at the first true loop"
     assert solver.rejected.tolist() == [false]
     assert solver.result().rejected_edges.tolist() == [false]
+    assert abs(solver.poses[10, 0] - 9.8) < 0.05
 
 
 def test_schedules_graduate_new_loops_by_their_own_rule():
@@ -148,11 +154,25 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
     solver, information = _chain("egnc")
     gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
     report = solver.update()
-    assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # a strong outlier skips mu*
+    assert report.mu_history[:, 0].tolist() == [1.0]  # strong at arrival: no mu = 0 stage
     assert gross in solver.rejected
 
-    solver, information = _chain("egnc")
-    solver.add_loop(0, 10, [10.4, 0.0, 0.0], information)
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=False))
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    for k in range(10):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
+    gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
+    report = solver.update()
+    assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after its first stage: skips mu*
+    assert gross in solver.rejected
+
+    # Stiff odometry (x variance 1e-4 m^2 from pose 0 to 10): the loop's residual hardly shrinks at
+    # mu = 0, and r = 2.2 lies between c / sqrt(3) = 1.73 and the strong threshold sqrt(6.25) = 2.5.
+    solver = OnlineSolver(2, "egnc")
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    for k in range(10):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1e5, 1e4, 1e4]))
+    solver.add_loop(0, 10, [10.22, 0.0, 0.0], information)
     report = solver.update()
     # Inside the band: 0, then mu*(r) at the first stage's residual (in (1/2, 1) above c / sqrt(3)), then 1.
     history = report.mu_history[:, 0]
