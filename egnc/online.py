@@ -7,8 +7,8 @@ by the schedule's rule (`egnc.schedules`, DESIGN.md sections 3 and 7):
 
 - `risam`: the graduating loops share riSAM's sequence `0, 0.12, 0.384, 0.965, 1`;
 - `egnc`: each graduating loop goes `0 -> mu*(r) -> 1`, or `0 -> 1` once its residual passed the
-  strong-outlier threshold (chi-square 0.9); a new loop already past it at the current estimate
-  starts at `mu = 1` (`OnlineOptions.strong_at_arrival`).
+  strong-outlier threshold (chi-square 0.9); with `OnlineOptions.strong_at_arrival`, a new loop
+  already past it at the current estimate starts at `mu = 1`.
 
 Each stage of the graduation is a warm-started IRLS solve of the whole current graph
 (`egnc.least_squares`), with the other loops at their own `mu`. After the last stage every loop's
@@ -106,15 +106,19 @@ class OnlineOptions:
             estimate is above the strong-outlier threshold (`high_quantile`) is a strong outlier
             at once and starts at `mu = 1`, as EGNC's Algorithm 1 treats a factor found strong
             after a solve; it skips the `mu = 0` stage, where a false loop would bend the map.
-            Measured (BENCHMARKS.md): manhattanOlson3500 at 50 % false loops, precision 1.0 and
-            ATE 0 m instead of 0.988 and 0.44 m, with 0.37x the iterations.
+            Off by default (EGNC-PGO starts every new loop at 0). Measured (BENCHMARKS.md): on
+            the riSAM-protocol false loops it helps (manhattanOlson3500 at 50 %: P 1.0 and ATE
+            0 m instead of 0.988 and 0.44 m, 0.37x the iterations, p99 58 instead of 461 ms),
+            but on manhattan_noisy.irl, whose drifted odometry puts true loops far off at
+            arrival, it rejects 15 true loops and bends the map (P 0.936, ATE 19.7 m instead of
+            1.0 and 1.93 m).
     """
 
     regraduate: Literal["reference", "new"] = "reference"
     low_quantile: float = 0.25
     high_quantile: float = 0.9
     stage_iterations: int | None = 1
-    strong_at_arrival: bool = True
+    strong_at_arrival: bool = False
 
     def __post_init__(self) -> None:
         if self.regraduate not in ("reference", "new"):

@@ -154,16 +154,16 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
     solver, information = _chain("egnc")
     gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
     report = solver.update()
-    assert report.mu_history[:, 0].tolist() == [1.0]  # strong at arrival: no mu = 0 stage
+    assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after its first stage: skips mu*
     assert gross in solver.rejected
 
-    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=False))
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=True))
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(10):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
     gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
     report = solver.update()
-    assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after its first stage: skips mu*
+    assert report.mu_history[:, 0].tolist() == [1.0]  # strong at arrival: no mu = 0 stage
     assert gross in solver.rejected
 
     # Stiff odometry (x variance 1e-4 m^2 from pose 0 to 10): the loop's residual hardly shrinks at
