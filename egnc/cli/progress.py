@@ -1,5 +1,7 @@
 """Progress of a solve on stderr: a live line on a terminal, one line per stage otherwise.
 
+An online replay reports per update instead (`StepProgress`).
+
 `egnc.solve` reports through two callbacks: `on_iteration(iterations, cost)` after every accepted
 solver step and `on_stage(StageReport)` when a stage ends. On a terminal the iteration line is
 rewritten in place (carriage return), at most `REFRESH_S` apart, and each finished stage leaves
@@ -14,6 +16,7 @@ import time
 from typing import TextIO
 
 from egnc.gnc import StageReport
+from egnc.online import UpdateReport
 
 REFRESH_S = 0.1
 """Shortest interval between two rewrites of the live line, seconds."""
@@ -67,3 +70,47 @@ class Progress:
         self._stage += 1
         self._line_open = False
         self._last_refresh = -math.inf
+
+
+class StepProgress:
+    """The `on_step` callback of an online replay (`egnc.replay`), writing to `stream`.
+
+    On a terminal one live line, rewritten at most `REFRESH_S` apart; in a log one line per tenth
+    of the steps. Each line: steps done of all, poses and loop closures so far, loops rejected
+    right now, the slowest update so far, and the elapsed time.
+
+    Args:
+        stream: where to write (stderr).
+        clock: seconds, monotonic (replaceable in tests).
+    """
+
+    def __init__(self, stream: TextIO, clock=time.monotonic):
+        self._stream = stream
+        self._clock = clock
+        self._live = stream.isatty()
+        self._started = clock()
+        self._last_refresh = -math.inf
+        self._slowest_ms = 0.0
+        self._loops = 0
+
+    def on_step(self, step: int, total: int, report: UpdateReport) -> None:
+        """Report one finished update."""
+        self._slowest_ms = max(self._slowest_ms, 1e3 * report.time_s)
+        self._loops += len(report.new_loops)
+        now = self._clock()
+        last = step == total
+        if self._live:
+            if not last and now - self._last_refresh < REFRESH_S:
+                return
+        elif not (last or step % max(1, total // 10) == 0):
+            return
+        self._last_refresh = now
+        line = (
+            f"step {step}/{total}: {self._loops} loop closures, {report.iterations} iterations in the last update,"
+            f" slowest update {self._slowest_ms:.1f} ms (elapsed {now - self._started:.1f} s)"
+        )
+        if self._live:
+            self._stream.write(f"\r{line}\x1b[K" + ("\n" if last else ""))
+        else:
+            self._stream.write(line + "\n")
+        self._stream.flush()

@@ -1,4 +1,10 @@
-"""`egnc-solve`: optimize a g2o pose graph from the command line.
+"""`egnc-solve`: optimize a g2o pose graph or an IRL log from the command line, in batch or online.
+
+The input is read as riSAM's Incremental Robot Log (`egnc.io.irl`) when its name ends in `.irl`
+or its fourth line is `nonlinear` (the IRL header), else as g2o. For an IRL log the known inliers
+are its ODOMETRY entries, and edge indices count its ODOMETRY and LOOP entries in file order.
+`--online` replays the input pose by pose through the online solver (`egnc.replay`) instead of
+solving it in one batch.
 
 Exit codes: 0 success; 1 an error about the input, the solve or an output (one line on stderr,
 no output written); 2 bad command-line usage (argparse); 3 numerical failure (the solve produced
@@ -20,17 +26,19 @@ from egnc import __version__
 from egnc.api import INITIALIZATIONS, METHODS, Result, solve
 from egnc.cli.arguments import int_at_least, positive_float
 from egnc.cli.outputs import OutputPlan
-from egnc.cli.progress import Progress
+from egnc.cli.progress import Progress, StepProgress
 from egnc.cli.report import report_dict, summary
 from egnc.cli.signals import INTERRUPT_EXIT_CODES, Terminated, sigterm_raises
 from egnc.errors import EgncError, EgncWarning, NumericalError
 from egnc.graph import PoseGraph
-from egnc.io import read_g2o
+from egnc.io import read_g2o, read_irl
 from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.linear_solvers import LINEAR_SOLVERS, cholmod_available
+from egnc.online import ONLINE_METHODS
+from egnc.replay import latency_summary, replay
 from egnc.step_solver import LINEAR_METHODS
 
 EXIT_NUMERICAL_FAILURE = 3
@@ -51,6 +59,8 @@ on CHOLMOD and had not finished after 11 minutes on SuperLU (BENCHMARKS.md, "Lar
 
 EXAMPLES = """examples:
   egnc-solve datasets/grid2d_outliers.g2o -o solved.g2o
+  egnc-solve manhattan_noisy.irl --report report.json
+  egnc-solve manhattan_noisy.irl --online --method risam --checkpoint run.ckpt
   egnc-solve graph.g2o --method risam --report report.json
   egnc-solve graph.g2o --drop-outliers -o inliers_only.g2o
   egnc-solve graph.g2o --method l2 --linear-solver scipy
@@ -68,11 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of `egnc-solve`."""
     parser = argparse.ArgumentParser(
         prog="egnc-solve",
-        description="Optimize a 2D or 3D pose graph given as a g2o file.",
+        description="Optimize a 2D or 3D pose graph given as a g2o file or an IRL log, in batch or online.",
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("input", type=Path, help="input pose graph (.g2o)")
+    parser.add_argument("input", type=Path, help="input pose graph (.g2o) or riSAM log (.irl)")
     parser.add_argument("-o", "--output", type=Path, help="write the optimized graph here (.g2o)")
     parser.add_argument(
         "--method",
@@ -126,6 +136,26 @@ def build_parser() -> argparse.ArgumentParser:
         "--skip-unknown",
         action="store_true",
         help="skip lines with g2o tags egnc does not read (landmarks, parameters, ...); -o writes them back unchanged",
+    )
+    parser.add_argument(
+        "--online",
+        action="store_true",
+        help="replay the input pose by pose through the online solver (methods egnc and risam): each new pose"
+        " with its odometry and loop closures is one update; the report gains an 'online' object",
+    )
+    parser.add_argument(
+        "--checkpoint",
+        type=Path,
+        metavar="PATH",
+        help="with --online: save the solver's state here every --checkpoint-every steps, and resume from it"
+        " when it exists (same input and method)",
+    )
+    parser.add_argument(
+        "--checkpoint-every",
+        type=int_at_least(1),
+        default=50,
+        metavar="N",
+        help="with --checkpoint: steps between two saves (default 50; one more after the last step)",
     )
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument(
@@ -188,7 +218,7 @@ def _main(argv: list[str] | None) -> int:
     )
     try:
         with sigterm_raises():
-            result, written = _run(args, plan)
+            result, written, online = _run(args, plan)
     except NumericalError as error:
         print(f"egnc-solve: numerical failure: {error}", file=sys.stderr)
         return EXIT_NUMERICAL_FAILURE
@@ -202,39 +232,116 @@ def _main(argv: list[str] | None) -> int:
         return code
     if not args.quiet:
         print(summary(result, written))
+        if online is not None:
+            latency = online["update_ms"]
+            print(
+                f"online: {online['steps']} updates, {online['iterations']} iterations, {online['total_s']:.3f} s;"
+                f" update ms p50 {latency['p50']:.1f}, p99 {latency['p99']:.1f}, max {latency['max']:.1f}"
+            )
     return 0
 
 
-def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]]:
+def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path], dict | None]:
     """Check the outputs, read, solve, write: the work of `main` between its error handlers."""
+    _check_options(args)
     plan.check(args.input)  # before a long read and solve, not after them
+    if args.checkpoint is not None and any(_same_path(args.checkpoint, path) for _, path in plan.paths()):
+        raise EgncError(f"{args.checkpoint}: --checkpoint names an output file; choose another path")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        graph = read_g2o(args.input, skip_unknown=args.skip_unknown, information=args.information)
-        known_inliers = _known_inliers(args.known_inliers, graph)
+        graph, odometry = _read(args)
+        known_inliers = odometry if args.known_inliers == "odometry" else _known_inliers(args.known_inliers, graph)
         read_notes = _warning_notes(caught) + _duplicate_note(graph, args.input)
         _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
         hint = None if args.quiet else cholmod_hint(graph, args.linear_solver, cholmod_available())
         if hint is not None:
             print(f"hint: {hint}", file=sys.stderr, flush=True)
         read_count = len(caught)
-        progress = None if args.quiet else Progress(sys.stderr)
-        result = solve(
-            graph,
-            args.method,
-            known_inliers=known_inliers,
-            init=args.init,
-            linear_solver=args.linear_solver,
-            options=SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method),
-            on_stage=None if progress is None else progress.on_stage,
-            on_iteration=None if progress is None else progress.on_iteration,
-        )
+        options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
+        online = None
+        if args.online:
+            outcome = replay(
+                graph,
+                args.method,
+                known_inliers=_mask(known_inliers, graph),
+                linear_solver=args.linear_solver,
+                options=options,
+                checkpoint=args.checkpoint,
+                checkpoint_every=args.checkpoint_every,
+                on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
+            )
+            result = outcome.result
+            online = {
+                "steps": outcome.steps,
+                "resumed_from": outcome.resumed_from,
+                "total_s": outcome.total_s,
+                "iterations": int(outcome.update_iterations.sum()),
+                "update_ms": latency_summary(outcome.update_ms),
+            }
+        else:
+            progress = None if args.quiet else Progress(sys.stderr)
+            result = solve(
+                graph,
+                args.method,
+                known_inliers=known_inliers,
+                init=args.init,
+                linear_solver=args.linear_solver,
+                options=options,
+                on_stage=None if progress is None else progress.on_stage,
+                on_iteration=None if progress is None else progress.on_iteration,
+            )
     _require_finite(result, args.input)
     report = report_dict(result, read_notes + _warning_notes(caught[read_count:]))
+    if online is not None:
+        report["online"] = online
     _print_warnings(report["warnings"][len(read_notes) :])  # the solve's, the result's, the report's
     written, output_notes = plan.write(result, graph, report)
     _print_warnings(output_notes)
-    return result, written
+    return result, written, online
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse option combinations that cannot apply, before anything is read."""
+    if args.online and args.method not in ONLINE_METHODS:
+        raise EgncError(f"--online replays with the methods {' and '.join(ONLINE_METHODS)}, not {args.method}")
+    if args.online and args.init != "file":
+        raise EgncError("--online places every new pose by composing its odometry: --init does not apply")
+    if not args.online and args.checkpoint is not None:
+        raise EgncError("--checkpoint saves the state of an --online replay: add --online")
+    if is_irl(args.input) and (args.skip_unknown or args.information != "strict"):
+        raise EgncError("--skip-unknown and --information apply to g2o files, not to IRL logs")
+
+
+def _read(args: argparse.Namespace) -> tuple[PoseGraph, np.ndarray]:
+    """The input graph and its odometry: an IRL log's ODOMETRY entries, a g2o file's consecutive-id edges."""
+    if is_irl(args.input):
+        log = read_irl(args.input)
+        return log.graph, log.is_odometry
+    graph = read_g2o(args.input, skip_unknown=args.skip_unknown, information=args.information)
+    return graph, graph.is_odometry
+
+
+def is_irl(path: Path) -> bool:
+    """Whether `path` holds an IRL log: named `.irl`, or its fourth line is `nonlinear` (the IRL header)."""
+    if path.suffix.lower() == ".irl":
+        return True
+    try:
+        with open(path, encoding="utf-8", errors="replace") as text:
+            head = [text.readline(200) for _ in range(4)]
+    except OSError:
+        return False  # the g2o reader reports it
+    return head[3].strip() == "nonlinear" and head[2].strip() in ("2", "3")
+
+
+def _mask(known_inliers: str | np.ndarray, graph: PoseGraph) -> np.ndarray:
+    """`(E,)` bool known-inlier mask from the `--known-inliers` choice."""
+    if isinstance(known_inliers, str):
+        return np.zeros(graph.num_edges, dtype=bool) if known_inliers == "none" else graph.is_odometry
+    return known_inliers
+
+
+def _same_path(a: Path, b: Path) -> bool:
+    return a.resolve() == b.resolve()
 
 
 def _warning_notes(caught: list[warnings.WarningMessage]) -> list[str]:

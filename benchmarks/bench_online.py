@@ -1,0 +1,156 @@
+"""The online solver on replayed logs: accuracy, total cost, and latency per update, egnc vs risam.
+
+    python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
+        [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
+        [--regraduate reference|new] [--strong-at-arrival] [--linear-solver auto] [--json results.jsonl]
+
+For every dataset and percentage, the clean graph's least-squares optimum is the reference; the
+graph is corrupted with riSAM-protocol false loops (`egnc.datasets.add_false_loops`, seeded) and
+replayed pose by pose through `egnc.replay` with each method in turn, in this process, one run at
+a time. An IRL log (`--irl`, default manhattan_noisy) is replayed as it is and scored against its
+own labels; its reference is the least-squares optimum without the labelled outliers.
+
+Columns:
+- `P`, `R`: precision and recall of the final decision (`OnlineSolver.result()`), outliers the
+  positive class; `P now`, `R now`: the same for the solver's running decision before it
+  (`OnlineSolver.inliers`, the chi-square test at the robust estimate).
+- `ATE`: of the final result against the reference, metres, after rigid alignment.
+- `updates`: updates (one per new pose); `loop updates`: those that added a loop closure.
+- `iterations`: accepted solver steps summed over all updates (the final decision excluded).
+- `total s`: sum of the update times (reading, reference, final decision excluded);
+  `decide s`: the final decision.
+- `p50`, `p99`, `max`: update latency in milliseconds over all updates; `loop p50`: over the
+  updates that added a loop closure.
+- `ratio`: egnc's total time and iterations over risam's on the same replay.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DATASETS = Path(os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets"))
+
+
+def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespace) -> dict:
+    """Replay one graph with one method; the row's figures."""
+    from egnc.metrics import ate, precision_recall
+    from egnc.online import OnlineOptions
+    from egnc.replay import latency_summary, replay, replay_steps
+
+    options = OnlineOptions(
+        regraduate=args.regraduate,
+        stage_iterations=args.stage_iterations or None,
+        strong_at_arrival=args.strong_at_arrival,
+    )
+    outcome = replay(graph, method, known_inliers=known, linear_solver=args.linear_solver, online_options=options)
+    steps = replay_steps(graph, known)
+    # The running decision, in file order (the result already is): edge k of the solver is inserted[k].
+    inserted = np.concatenate(steps)
+    now_rejected = np.zeros(graph.num_edges, dtype=bool)
+    now_rejected[inserted] = ~outcome.solver.inliers
+    started = time.perf_counter()
+    outcome.solver.result()  # replay() made it already; this times the final decision alone
+    decide_s = time.perf_counter() - started
+    precision, recall = precision_recall(~outcome.result.inliers, is_outlier)
+    now_precision, now_recall = precision_recall(now_rejected, is_outlier)
+    ms, iterations = outcome.update_ms, outcome.update_iterations
+    has_loop = np.array([bool((~known[step]).any()) for step in steps])
+    latency = latency_summary(ms)
+    return {
+        "method": method,
+        "P": precision,
+        "R": recall,
+        "P_now": now_precision,
+        "R_now": now_recall,
+        "ate": ate(outcome.result.graph.poses, reference, graph.dim),
+        "updates": int(outcome.steps),
+        "loop_updates": int(has_loop.sum()),
+        "iterations": int(iterations.sum()),
+        "total_s": float(outcome.total_s),
+        "decide_s": decide_s,
+        **latency,
+        "loop_p50": float(np.percentile(ms[has_loop], 50)) if has_loop.any() else 0.0,
+    }
+
+
+def cases(args: argparse.Namespace):
+    """`(name, percent, graph, is_outlier, known, reference)` of every case, lazily."""
+    from egnc.api import solve
+    from egnc.datasets import add_false_loops
+    from egnc.io import read_g2o, read_irl
+
+    for name in filter(None, args.datasets.split(",")):
+        graph = read_g2o(DATASETS / f"{name}.g2o")
+        reference = solve(graph, "l2", linear_solver=args.linear_solver).graph.poses
+        for percent in (float(p) for p in args.percents.split(",")):
+            corrupted = add_false_loops(graph, percent, seed=args.seed, reference_poses=reference)
+            g = corrupted.graph
+            yield name, percent, g, corrupted.is_outlier, g.is_odometry, reference
+    for name in filter(None, args.irl.split(",")):
+        log = read_irl(DATASETS / f"{name}.irl")
+        clean = log.graph.subgraph_edges(~log.is_outlier)
+        reference = solve(clean, "l2", linear_solver=args.linear_solver).graph.poses
+        percent = 100.0 * log.is_outlier.sum() / max(1, (~log.is_odometry).sum())
+        yield name, percent, log.graph, log.is_outlier, log.is_odometry, reference
+
+
+HEADER = (
+    "| dataset | % | method | P | R | P now | R now | ATE (m) | updates | loop updates | iterations | total s"
+    " | decide s | p50 ms | p99 ms | max ms | loop p50 ms | ratio time / iterations |"
+)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--datasets", default="csail,intel,manhattanOlson3500,sphere2500")
+    parser.add_argument("--percents", default="10,30,50")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--methods", default="egnc,risam")
+    parser.add_argument("--irl", default="manhattan_noisy", help="IRL logs (names in the datasets folder); '' for none")
+    parser.add_argument("--stage-iterations", type=int, default=1, help="0: every stage converges")
+    parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
+    parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
+    parser.add_argument("--linear-solver", default="auto")
+    parser.add_argument("--json", type=Path, help="append one JSON line per row here")
+    args = parser.parse_args()
+
+    import egnc
+
+    print(
+        f"egnc {egnc.__version__}, Python {platform.python_version()}, numpy {np.__version__},"
+        f" {os.cpu_count()} CPUs, {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}",
+        file=sys.stderr,
+    )
+    print(HEADER)
+    print("|" + "---|" * (HEADER.count("|") - 1))
+    for name, percent, graph, is_outlier, known, reference in cases(args):
+        rows = [run(graph, is_outlier, known, reference, method, args) for method in args.methods.split(",")]
+        by_method = {row["method"]: row for row in rows}
+        for row in rows:
+            ratio = ""
+            if row["method"] == "egnc" and "risam" in by_method:
+                other = by_method["risam"]
+                ratio = f"{row['total_s'] / other['total_s']:.2f}x / {row['iterations'] / other['iterations']:.2f}x"
+            print(
+                f"| {name} | {percent:.0f} | {row['method']} | {row['P']:.4f} | {row['R']:.4f} | {row['P_now']:.4f}"
+                f" | {row['R_now']:.4f} | {row['ate']:.4f} | {row['updates']} | {row['loop_updates']}"
+                f" | {row['iterations']} | {row['total_s']:.1f} | {row['decide_s']:.2f} | {row['p50']:.1f}"
+                f" | {row['p99']:.1f} | {row['max']:.1f} | {row['loop_p50']:.1f} | {ratio} |",
+                flush=True,
+            )
+            if args.json is not None:
+                with open(args.json, "a", encoding="utf-8") as out:
+                    out.write(json.dumps({"dataset": name, "percent": percent, **row}) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,812 @@
+"""An online robust solver: poses and loop closures arrive over time, each update graduates the new loops.
+
+riSAM and EGNC-PGO are incremental back-ends. Between two updates the map is converged; an
+update adds poses, odometry and loop closures, and the loop closures it adds start at `mu = 0`
+(quadratic SIG) and are graduated towards `mu = 1` (Geman-McClure) from the current estimate,
+by the schedule's rule (`egnc.schedules`, DESIGN.md sections 3 and 7):
+
+- `risam`: the graduating loops share riSAM's sequence `0, 0.12, 0.384, 0.965, 1`;
+- `egnc`: each graduating loop goes `0 -> mu*(r) -> 1`, or `0 -> 1` once its residual passed the
+  strong-outlier threshold (chi-square 0.9); with `OnlineOptions.strong_at_arrival`, a new loop
+  already past it at the current estimate starts at `mu = 1`.
+
+Each stage of the graduation is a warm-started IRLS solve of the whole current graph
+(`egnc.least_squares`), with the other loops at their own `mu`. After the last stage every loop's
+`mu_init` is reset by its residual, as the reference implementations do after convergence: above
+the chi-square 0.9 quantile a loop starts at `mu = 1` the next time it is graduated (it stays
+switched off), below the 0.25 quantile at `mu = 0`. With `regraduate="reference"` (default) the
+next update that brings loop closures graduates, with the new loops, every older loop whose
+`mu_init` is 0, as riSAM re-graduates the loops its update touches: the loops that fit are then
+quadratic again while a new loop is weighed, and hold the map against it. With `"new"` only the
+new loops graduate and the older ones keep `mu = 1`; their Geman-McClure weights give way when a
+false loop bends the map at its `mu = 0` stage. Measured (BENCHMARKS.md): the same decisions and
+5 to 30 % fewer iterations on CSAIL, Intel and manhattan_noisy.irl, but on manhattanOlson3500 with
+30 % false loops precision 0.88 and ATE 27.6 m against 0.993 and 0.30 m.
+
+Every loop stays in every solve with its IRLS weight, so a loop rejected early comes back when
+later evidence pulls the map towards it (its Geman-McClure weight grows as its residual falls,
+and its `mu_init` returns to 0), and a false loop accepted early leaves when later loops pull
+the map away from it. `result()` makes the batch decision (`egnc.decision`: least squares on the
+accepted loops, re-test, re-admission by innovation) on the current estimate.
+
+What an update costs follows what changed: new poses are placed by composing their odometry from
+the current estimate, so an update that only extends the trajectory leaves every residual
+at the optimum and solves nothing. An update with a loop closure re-analyses the grown system once
+(ordering and symbolic factorization, `egnc.least_squares.Problem`) and reuses it for all its
+stages.
+
+Gauge: the pose of the first `add_prior` is held fixed at the prior's value (as `egnc.io.irl`
+does: the only absolute factor is satisfied exactly at the optimum, whatever its covariance);
+without a prior, the first pose added is held fixed where it was placed.
+
+References:
+    M. McGann, F. Dellaert, M. Kaess, "Robust Incremental Smoothing and Mapping (riSAM)", ICRA 2023.
+    S. Kang et al., "Efficient Graduated Non-Convexity for Pose Graph Optimization" (EGNC-PGO).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from egnc.api import Result
+from egnc.decision import decide_outliers, truncated_cost
+from egnc.diagnostics import solve_warnings
+from egnc.errors import EgncError, GraphError
+from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
+from egnc.gnc import GncOptions, StageReport, classify_inliers
+from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.io.atomic import atomic_binary_file
+from egnc.kernels import make_kernel
+from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, SolverOptions, solve_least_squares
+from egnc.linear_solvers import resolve_name
+from egnc.losses import KernelLoss
+from egnc.mu_star import mu_star
+from egnc.schedules import exceeds
+
+__all__ = ["ONLINE_METHODS", "OnlineOptions", "OnlineSolver", "UpdateReport"]
+
+ONLINE_METHODS = ("egnc", "risam")
+"""Schedules the online solver graduates new loop closures with."""
+
+CHECKPOINT_VERSION = 1
+"""Format version written into every checkpoint; `OnlineSolver.load` refuses others."""
+
+_RESIDUAL_AT_REST = 1e-9
+"""A new edge whose whitened residual is below this at the current estimate changes no optimum."""
+
+
+@dataclass(frozen=True)
+class OnlineOptions:
+    """Options of the online protocol.
+
+    Attributes:
+        regraduate: which loops an update with new loop closures graduates: `"reference"`
+            (default) the new ones and every older loop whose `mu_init` is 0, as riSAM
+            re-graduates the loops its update touches; `"new"` only the new ones (older loops keep
+            their `mu`, 1 once graduated): fewer iterations, but false loops bent the map on
+            manhattanOlson3500 (module docstring).
+        low_quantile: after an update's graduation, a loop with `r^2` (or `r`, by
+            `GncOptions.threshold`) below `chi2.ppf(low_quantile, d)` gets `mu_init = 0`.
+        high_quantile: ... and above `chi2.ppf(high_quantile, d)` gets `mu_init = 1`: it is not
+            graduated again and keeps its Geman-McClure weight, which comes back by itself if the
+            map moves towards it.
+        stage_iterations: at most this many solver steps per graduation stage but the last,
+            which converges (to `GncOptions.stage_rel_cost_tol`); None: every stage converges.
+            riSAM and EGNC-PGO take one step per `mu` value (one iSAM2 update each). Measured
+            (BENCHMARKS.md, CSAIL and Intel at 30 %): 1 step halves the iterations of converged
+            stages with the same decisions.
+        strong_at_arrival: `egnc` only: a new loop whose residual at the current (converged)
+            estimate is above the strong-outlier threshold (`high_quantile`) is a strong outlier
+            at once and starts at `mu = 1`, as EGNC's Algorithm 1 treats a factor found strong
+            after a solve; it skips the `mu = 0` stage, where a false loop would bend the map.
+            Off by default (EGNC-PGO starts every new loop at 0). Measured (BENCHMARKS.md): on
+            the riSAM-protocol false loops it helps (manhattanOlson3500 at 50 %: P 1.0 and ATE
+            0 m instead of 0.988 and 0.44 m, 0.37x the iterations, p99 58 instead of 461 ms),
+            but on manhattan_noisy.irl, whose drifted odometry puts true loops far off at
+            arrival, it rejects 15 true loops and bends the map (P 0.936, ATE 19.7 m instead of
+            1.0 and 1.93 m).
+    """
+
+    regraduate: Literal["reference", "new"] = "reference"
+    low_quantile: float = 0.25
+    high_quantile: float = 0.9
+    stage_iterations: int | None = 1
+    strong_at_arrival: bool = False
+
+    def __post_init__(self) -> None:
+        if self.regraduate not in ("reference", "new"):
+            raise EgncError(f"unknown regraduate {self.regraduate!r}: choose 'reference' or 'new'")
+        if not 0.0 < self.low_quantile < self.high_quantile < 1.0:
+            raise EgncError("need 0 < low_quantile < high_quantile < 1")
+        if self.stage_iterations is not None and self.stage_iterations < 1:
+            raise EgncError(f"stage_iterations must be at least 1, got {self.stage_iterations}")
+
+
+@dataclass(frozen=True, eq=False)
+class UpdateReport:
+    """What one `OnlineSolver.update()` did.
+
+    Attributes:
+        step: 1-based number of the update.
+        new_poses: poses added by the update.
+        new_edges: `(K,)` indices of the edges it added (odometry and loops, in insertion order).
+        new_loops: `(L,)` indices of the loop closures it added.
+        graduated: loop closures graduated by the update (the new ones and, with
+            `regraduate="reference"`, older ones whose `mu_init` is 0).
+        stages: one report per solve (empty when nothing needed solving).
+        mu_history: `(S, L)` `mu` of each new loop closure in each stage.
+        iterations: accepted solver steps over the stages.
+        time_s: wall time of the update in seconds.
+        reanalysed: whether the grown system was re-analysed (ordering and symbolic factorization).
+        status: termination code of the last solve (`egnc.least_squares.STATUS_MESSAGES`); -1 when
+            nothing was solved.
+    """
+
+    step: int
+    new_poses: int
+    new_edges: np.ndarray
+    new_loops: np.ndarray
+    graduated: int
+    stages: tuple[StageReport, ...]
+    mu_history: np.ndarray
+    iterations: int
+    time_s: float
+    reanalysed: bool
+    status: int
+
+
+@dataclass
+class _Pending:
+    """Entries added since the last update, in arrival order."""
+
+    pose_ids: list[int] = field(default_factory=list)
+    pose_values: list[np.ndarray | None] = field(default_factory=list)
+    edge_ids: list[tuple[int, int]] = field(default_factory=list)
+    measurements: list[np.ndarray] = field(default_factory=list)
+    information: list[np.ndarray] = field(default_factory=list)
+    robust: list[bool] = field(default_factory=list)
+    prior: tuple[int, np.ndarray] | None = None
+
+    def __bool__(self) -> bool:
+        return bool(self.pose_ids or self.edge_ids or self.prior is not None)
+
+
+class OnlineSolver:
+    """Robust pose-graph optimization as data arrives (module docstring).
+
+    Use: `add_pose` / `add_odometry` / `add_prior` / `add_loop` (or their batch forms), then
+    `update()`; read `poses`, `inliers` / `rejected` and `result()` at any moment.
+
+    Args:
+        dim: 2 (SE(2)) or 3 (SE(3)).
+        method: `"egnc"` (per-loop `mu*` and the strong-outlier rule) or `"risam"`.
+        linear_solver: `"auto"`, `"cholmod"` or `"scipy"`.
+        options: options of each GN/LM solve.
+        gnc_options: kernel shape `c`, threshold conventions, outlier and re-admission quantiles
+            (`warm_start`, `every_stage` and `max_stages` do not apply: online stages are always
+            warm-started).
+        online_options: the update protocol (`OnlineOptions`).
+    """
+
+    def __init__(
+        self,
+        dim: int,
+        method: str = "egnc",
+        *,
+        linear_solver: str = "auto",
+        options: SolverOptions | None = None,
+        gnc_options: GncOptions | None = None,
+        online_options: OnlineOptions | None = None,
+    ):
+        if dim not in POSE_SIZE:
+            raise EgncError(f"dim must be 2 or 3, got {dim}")
+        if method not in ONLINE_METHODS:
+            raise EgncError(f"unknown online method {method!r}: choose one of {', '.join(ONLINE_METHODS)}")
+        self.dim, self.method = dim, method
+        self.linear_solver = resolve_name(linear_solver)
+        self.options = options or SolverOptions()
+        self.gnc_options = gnc_options or GncOptions()
+        self.online_options = online_options or OnlineOptions()
+        self._d = TANGENT_SIZE[dim]
+        self._n = dim + 1
+        self._group = group_of(dim)
+        self._kernel = make_kernel("sig", c=self.gnc_options.c)
+        self._row: dict[int, int] = {}
+        self._vertex_ids = np.zeros(0, dtype=np.int64)
+        self._T = np.zeros((0, self._n, self._n))
+        self._T_initial = np.zeros((0, self._n, self._n))
+        self._gauge = -1  # row held fixed; -1 before the first pose
+        self._has_prior = False
+        self._edges = np.zeros((0, 2), dtype=np.int64)
+        self._measurements = np.zeros((0, POSE_SIZE[dim]))
+        self._Z_inv = np.zeros((0, self._n, self._n))
+        self._information = np.zeros((0, self._d, self._d))
+        self._robust = np.zeros(0, dtype=bool)
+        self._mu = np.zeros(0)
+        self._mu_init = np.zeros(0)
+        self._r = np.zeros(0)
+        self._steps = 0
+        self._update_ms: list[float] = []
+        self._update_iterations: list[int] = []
+        self._pending = _Pending()
+        self._known_ids: set[int] = set()
+        self._problem: Problem | None = None
+        self._factors: BetweenFactors | None = None
+        self._last_status = -1
+        self.last_update: UpdateReport | None = None
+
+    # ------------------------------------------------------------------ adding data
+
+    def add_pose(self, vertex_id: int, pose: ArrayLike | None = None) -> None:
+        """Add a pose; `pose` `(P,)` (`x y theta` or `x y z qx qy qz qw`) is its initial guess.
+
+        Without `pose`, the pose must be reached by an odometry edge added before the next update,
+        which places it by composing the measurement from the other end's current estimate.
+        """
+        self.add_poses([vertex_id], None if pose is None else np.reshape(pose, (1, -1)))
+
+    def add_poses(self, vertex_ids: ArrayLike, poses: ArrayLike | None = None) -> None:
+        """Batch `add_pose`: `vertex_ids` `(K,)`, `poses` `(K, P)` or None."""
+        ids = _ids(vertex_ids, 1)
+        values = None if poses is None else _array(poses, (len(ids), POSE_SIZE[self.dim]), "poses")
+        if len(set(ids.tolist())) < len(ids) or self._known_ids.intersection(ids.tolist()):
+            raise GraphError(f"a pose among {ids[:5].tolist()} was already added")
+        for k, vertex_id in enumerate(ids.tolist()):
+            self._known_ids.add(vertex_id)
+            self._pending.pose_ids.append(vertex_id)
+            self._pending.pose_values.append(None if values is None else values[k])
+
+    def add_prior(self, vertex_id: int, pose: ArrayLike) -> None:
+        """Hold pose `vertex_id` at `pose` `(P,)`: the gauge of the map (module docstring); one per solver."""
+        if self._has_prior or self._pending.prior is not None:
+            raise GraphError("a second prior: the online solver uses one prior as the gauge")
+        value = _array(pose, (POSE_SIZE[self.dim],), "prior pose")
+        vertex_id = int(vertex_id)
+        if vertex_id not in self._known_ids:
+            self.add_pose(vertex_id, value)
+        self._pending.prior = (vertex_id, value)
+
+    def add_odometry(self, i: int, j: int, measurement: ArrayLike, information: ArrayLike) -> int:
+        """Add a known-inlier edge measuring `X_i^-1 X_j`; returns its edge index.
+
+        Args:
+            i, j: vertex ids; at least one must be known (added before); the other, if new, is
+                placed by composing `measurement` from it.
+            measurement: `(P,)` relative pose in the stored parametrization.
+            information: `(d, d)` information matrix, translation first (g2o order).
+        """
+        return int(self.add_odometry_batch([[i, j]], np.asarray(measurement)[None], np.asarray(information)[None])[0])
+
+    def add_loop(self, a: int, b: int, measurement: ArrayLike, information: ArrayLike) -> int:
+        """Add a loop closure (a candidate outlier) measuring `X_a^-1 X_b`; both poses must be known."""
+        return int(self.add_loops([[a, b]], np.asarray(measurement)[None], np.asarray(information)[None])[0])
+
+    def add_odometry_batch(self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike) -> np.ndarray:
+        """Batch `add_odometry`: `ids` `(K, 2)`, `measurements` `(K, P)`, `information` `(K, d, d)`."""
+        return self._add_edges(ids, measurements, information, robust=False)
+
+    def add_loops(self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike) -> np.ndarray:
+        """Batch `add_loop`: `ids` `(K, 2)`, `measurements` `(K, P)`, `information` `(K, d, d)`."""
+        return self._add_edges(ids, measurements, information, robust=True)
+
+    def _add_edges(self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike, robust: bool) -> np.ndarray:
+        pairs = _ids(ids, 2)
+        k = len(pairs)
+        values = _array(measurements, (k, POSE_SIZE[self.dim]), "measurements")
+        info = _array(information, (k, self._d, self._d), "information")
+        if not np.allclose(info, info.swapaxes(1, 2), rtol=1e-9, atol=0.0):
+            raise GraphError("information matrices must be symmetric")
+        if k and np.any(np.linalg.eigvalsh(0.5 * (info + info.swapaxes(1, 2)))[:, 0] <= 0.0):
+            raise GraphError("information matrices must be positive definite")
+        known = set(self._known_ids)
+        for i, j in pairs.tolist():
+            if i == j:
+                raise GraphError(f"an edge joins pose {i} to itself")
+            if robust and not (i in known and j in known):
+                missing = i if i not in known else j
+                raise GraphError(f"loop closure ({i}, {j}): pose {missing} is not known; add it or its odometry first")
+            if not robust and i not in known and j not in known:
+                raise GraphError(f"odometry ({i}, {j}) joins two unknown poses: one end must be known")
+            known.update((i, j))
+        first = len(self._edges) + len(self._pending.edge_ids)
+        for (i, j), value, matrix in zip(pairs.tolist(), values, info):
+            for vertex_id in (i, j):
+                if vertex_id not in self._known_ids:
+                    self._known_ids.add(vertex_id)
+                    self._pending.pose_ids.append(vertex_id)
+                    self._pending.pose_values.append(None)
+            self._pending.edge_ids.append((i, j))
+            self._pending.measurements.append(value)
+            self._pending.information.append(matrix)
+            self._pending.robust.append(robust)
+        return np.arange(first, first + k)
+
+    # ------------------------------------------------------------------ updating
+
+    def update(self) -> UpdateReport:
+        """Take in everything added since the last update and re-optimize what it changed.
+
+        Returns:
+            The `UpdateReport` (also kept in `last_update`).
+        """
+        started = time.perf_counter()
+        self._steps += 1
+        num_old_edges, num_old_poses = len(self._edges), len(self._vertex_ids)
+        prior_moved = self._integrate()
+        new_edges = np.arange(num_old_edges, len(self._edges))
+        new_loops = new_edges[self._robust[new_edges]]
+        added = self._current_factors().subset(new_edges)
+        new_r = added.whitened_norms(added.residuals(self._T))
+        self._r = np.concatenate((self._r[:num_old_edges], new_r))
+        needs_solve = prior_moved or len(new_loops) > 0 or bool(np.any(new_r > _RESIDUAL_AT_REST))
+        stages: tuple[StageReport, ...] = ()
+        history = np.zeros((0, len(new_loops)))
+        graduating = np.zeros(len(self._edges), dtype=bool)
+        reanalysed = False
+        status = -1
+        if needs_solve:
+            reanalysed = self._problem is None
+            graduating = self._graduating(new_loops)
+            stages, history, status = self._graduate(graduating, new_loops)
+            self._reset_mu_init()
+        report = UpdateReport(
+            step=self._steps,
+            new_poses=len(self._vertex_ids) - num_old_poses,
+            new_edges=new_edges,
+            new_loops=new_loops,
+            graduated=int(graduating.sum()),
+            stages=stages,
+            mu_history=history,
+            iterations=sum(stage.iterations for stage in stages),
+            time_s=time.perf_counter() - started,
+            reanalysed=reanalysed,
+            status=status,
+        )
+        if status >= 0:
+            self._last_status = status
+        self._update_ms.append(1e3 * report.time_s)
+        self._update_iterations.append(report.iterations)
+        self.last_update = report
+        return report
+
+    def _integrate(self) -> bool:
+        """Move the pending entries into the graph; place new poses. Returns whether the gauge moved."""
+        pending, self._pending = self._pending, _Pending()
+        if not pending:
+            return False
+        n = self._n
+        # Poses: explicit values now, the others by composing odometry in arrival order.
+        start = len(self._vertex_ids)
+        for vertex_id in pending.pose_ids:
+            self._row[vertex_id] = len(self._row)
+        self._vertex_ids = np.concatenate((self._vertex_ids, np.array(pending.pose_ids, dtype=np.int64)))
+        new_T = np.zeros((len(pending.pose_ids), n, n))
+        placed = np.zeros(len(self._vertex_ids), dtype=bool)
+        placed[:start] = True
+        for k, value in enumerate(pending.pose_values):
+            if value is not None:
+                new_T[k] = to_matrices(self.dim, value)
+                placed[start + k] = True
+        self._T = np.concatenate((self._T, new_T))
+        if self._gauge < 0 and len(self._vertex_ids):
+            self._gauge = 0
+            if not placed[0]:  # the very first pose, placed by nothing: at the identity
+                self._T[0] = np.eye(n)
+                placed[0] = True
+        Z = to_matrices(self.dim, np.array(pending.measurements).reshape(-1, POSE_SIZE[self.dim]))
+        rows = np.array([[self._row[i], self._row[j]] for i, j in pending.edge_ids], dtype=np.int64).reshape(-1, 2)
+        robust = np.array(pending.robust, dtype=bool)
+        for (i, j), Z_ij, is_loop in zip(rows.tolist(), Z, robust.tolist()):
+            if is_loop or placed[i] == placed[j]:
+                continue
+            if placed[i]:
+                self._T[j] = self._T[i] @ Z_ij
+                placed[j] = True
+            else:
+                self._T[i] = self._T[j] @ self._group.inverse(Z_ij)
+                placed[i] = True
+        if not placed.all():
+            unplaced = self._vertex_ids[~placed][:5].tolist()
+            raise GraphError(f"poses {unplaced} have no value and no odometry from a placed pose")
+        self._T_initial = np.concatenate((self._T_initial, self._T[start:]))
+        self._edges = np.concatenate((self._edges, rows))
+        self._measurements = np.concatenate((self._measurements, np.array(pending.measurements).reshape(len(rows), -1)))
+        self._Z_inv = np.concatenate((self._Z_inv, self._group.inverse(Z)))
+        self._information = np.concatenate(
+            (self._information, np.array(pending.information).reshape(len(rows), self._d, self._d))
+        )
+        self._robust = np.concatenate((self._robust, robust))
+        self._mu = np.concatenate((self._mu, np.zeros(len(rows))))
+        self._mu_init = np.concatenate((self._mu_init, np.zeros(len(rows))))
+        if len(rows) or len(pending.pose_ids):
+            self._problem = self._factors = None
+        if pending.prior is None:
+            return False
+        # The prior's pose becomes the gauge: move the map rigidly onto it (relative residuals unchanged).
+        row = self._row[pending.prior[0]]
+        target = to_matrices(self.dim, pending.prior[1])
+        self._T = target @ self._group.inverse(self._T[row]) @ self._T
+        self._gauge, self._has_prior = row, True
+        self._problem = None
+        return True
+
+    def _current_factors(self) -> BetweenFactors:
+        if self._factors is None:
+            self._factors = BetweenFactors(self.dim, self._edges, self._Z_inv, self._information)
+        return self._factors
+
+    def _graph(self) -> PoseGraph:
+        """The current graph in insertion (row) order, poses at the current estimate."""
+        fixed = np.zeros(len(self._vertex_ids), dtype=bool)
+        fixed[self._gauge] = self._gauge != 0  # the solver fixes row 0 itself
+        return PoseGraph(
+            dim=self.dim,
+            vertex_ids=self._vertex_ids,
+            poses=from_matrices(self.dim, self._T),
+            edges=self._edges,
+            measurements=self._measurements,
+            information=self._information,
+            fixed=fixed,
+        )
+
+    def _current_problem(self) -> Problem:
+        if self._problem is None:
+            self._problem = Problem.from_graph(self._graph(), self.linear_solver, self._current_factors())
+        return self._problem
+
+    def _graduating(self, new_loops: np.ndarray) -> np.ndarray:
+        """`(E,)` bool: the loops this update graduates from `mu_init` (module docstring)."""
+        graduating = np.zeros(len(self._edges), dtype=bool)
+        graduating[new_loops] = True
+        if self.method == "egnc" and self.online_options.strong_at_arrival:
+            # EGNC's strong-outlier test after a solve, applied at the converged current estimate.
+            strong = new_loops[
+                exceeds(self._r[new_loops], self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+            ]
+            self._mu_init[strong] = self._mu[strong] = 1.0
+            graduating[strong] = False
+        if len(new_loops) and self.online_options.regraduate == "reference":
+            graduating |= self._robust & (self._mu_init == 0.0)
+        return graduating
+
+    def _graduate(
+        self, graduating: np.ndarray, new_loops: np.ndarray
+    ) -> tuple[tuple[StageReport, ...], np.ndarray, int]:
+        """Run the stages of one update; returns the stage reports, the new loops' `mu` per stage, the status."""
+        problem = self._current_problem()
+        gnc = self.gnc_options
+        tight = replace(self.options, rel_cost_tol=max(self.options.rel_cost_tol, gnc.stage_rel_cost_tol))
+        intermediate = tight
+        if self.online_options.stage_iterations is not None:
+            intermediate = replace(tight, max_iterations=self.online_options.stage_iterations)
+        self._mu[graduating] = self._mu_init[graduating]
+        active = graduating & (self._mu < 1.0)  # loops whose mu still moves this update
+        strong = np.zeros(len(self._edges), dtype=bool)
+        stage_index = 0
+        reports: list[StageReport] = []
+        history: list[np.ndarray] = []
+        status = 0
+        while True:
+            final = not np.any(active & (self._mu < 1.0))
+            started = time.perf_counter()
+            loss = KernelLoss(self._kernel, self._mu.copy(), self._robust)
+            solution = solve_least_squares(problem, self._T, loss, tight if final else intermediate)
+            self._T, self._r = solution.poses, solution.residual_norms
+            mu_loops = self._mu[self._robust]
+            reports.append(
+                StageReport(
+                    float(mu_loops.min(initial=np.nan)) if len(mu_loops) else np.nan,
+                    float(mu_loops.mean()) if len(mu_loops) else np.nan,
+                    float(mu_loops.max(initial=np.nan)) if len(mu_loops) else np.nan,
+                    iterations=solution.iterations,
+                    cost=solution.cost,
+                    time_s=time.perf_counter() - started,
+                    status=solution.status,
+                    active_edges=len(self._edges),
+                    cg_iterations=solution.linear.cg_iterations,
+                )
+            )
+            history.append(self._mu[new_loops].copy())
+            status = solution.status
+            if final or status == NUMERICAL_FAILURE:
+                break
+            stage_index += 1
+            # EGNC's strong-outlier test uses the same chi-square 0.9 quantile as the mu_init reset.
+            strong |= active & exceeds(self._r, self.online_options.high_quantile, self._d, gnc.threshold)
+            self._mu[active] = self._next_mu(stage_index, active, strong)
+        return tuple(reports), np.array(history).reshape(len(history), len(new_loops)), status
+
+    def _next_mu(self, stage_index: int, active: np.ndarray, strong: np.ndarray) -> np.ndarray:
+        """The `mu` of the `active` loops at stage `stage_index` >= 1 of an update."""
+        if self.method == "risam":
+            shared = 0.0
+            for _ in range(stage_index):  # riSAM's heuristic from mu_init = 0
+                shared = min(1.0, shared + 1.2 * (shared + 0.1))
+            return np.full(int(active.sum()), shared)
+        if stage_index >= 2:
+            return np.ones(int(active.sum()))
+        r = self._r[active]
+        mu = np.ones(len(r))
+        band = ~strong[active]
+        mu[band] = np.minimum(mu_star(r[band], self.gnc_options.c), 1.0)
+        return mu
+
+    def _reset_mu_init(self) -> None:
+        """After convergence: loops far off start at `mu = 1` next time, loops that fit at `mu = 0`."""
+        convention = self.gnc_options.threshold
+        high = self._robust & exceeds(self._r, self.online_options.high_quantile, self._d, convention)
+        low = self._robust & ~exceeds(self._r, self.online_options.low_quantile, self._d, convention)
+        self._mu_init[high] = 1.0
+        self._mu_init[low] = 0.0
+
+    # ------------------------------------------------------------------ reading
+
+    @property
+    def num_poses(self) -> int:
+        """Poses taken in by the updates so far."""
+        return len(self._vertex_ids)
+
+    @property
+    def num_edges(self) -> int:
+        """Edges (odometry and loop closures) taken in by the updates so far."""
+        return len(self._edges)
+
+    @property
+    def steps(self) -> int:
+        """Updates run so far."""
+        return self._steps
+
+    @property
+    def vertex_ids(self) -> np.ndarray:
+        """`(N,)` vertex ids in the order the poses were added (the row order of `poses`)."""
+        return self._vertex_ids.copy()
+
+    @property
+    def poses(self) -> np.ndarray:
+        """`(N, P)` current estimate, rows in `vertex_ids` order, in the stored parametrization."""
+        return from_matrices(self.dim, self._T)
+
+    @property
+    def edge_ids(self) -> np.ndarray:
+        """`(E, 2)` vertex ids of every edge, in insertion order."""
+        return self._vertex_ids[self._edges]
+
+    @property
+    def is_loop_closure(self) -> np.ndarray:
+        """`(E,)` bool: edges added as loop closures."""
+        return self._robust.copy()
+
+    @property
+    def mu(self) -> np.ndarray:
+        """`(E,)` current `mu` of each loop closure (nan for odometry)."""
+        return np.where(self._robust, self._mu, np.nan)
+
+    @property
+    def residual_norms(self) -> np.ndarray:
+        """`(E,)` whitened residual norms `r` at the current estimate."""
+        return self._r.copy()
+
+    @property
+    def inliers(self) -> np.ndarray:
+        """`(E,)` bool, the decision right now: a loop is out when `r^2 > chi2.ppf(outlier_quantile, d)`
+        at the current (robust) estimate. `result()` makes the batch decision instead."""
+        return classify_inliers(self._r, self._robust, self._d, self.gnc_options)
+
+    @property
+    def rejected(self) -> np.ndarray:
+        """Indices of the loop closures rejected right now (see `inliers`)."""
+        return np.flatnonzero(~self.inliers)
+
+    @property
+    def update_ms(self) -> np.ndarray:
+        """`(steps,)` wall time of every update so far, in milliseconds."""
+        return np.array(self._update_ms)
+
+    @property
+    def update_iterations(self) -> np.ndarray:
+        """`(steps,)` accepted solver steps of every update so far."""
+        return np.array(self._update_iterations, dtype=np.int64)
+
+    def result(self, decide: bool = True) -> Result:
+        """The current state as an `egnc.api.Result`, poses sorted by vertex id.
+
+        Args:
+            decide: make the batch decision (`egnc.decision.decide_outliers`) on the current
+                estimate: least squares on the accepted edges, re-test, re-admission; the result's
+                poses are then that least-squares map. False: the current robust estimate and
+                the decision of `inliers`.
+
+        The result's `stages` are one summary of all updates (iterations, time; status of the last
+        solve) followed by the decision rounds; `iterations` counts both.
+        """
+        if self._pending:
+            raise EgncError("entries were added after the last update: call update() first")
+        if not len(self._vertex_ids):
+            raise EgncError("the online solver holds no pose yet")
+        started = time.perf_counter()
+        graph = self._graph()
+        factors = self._current_factors()
+        robust = self._robust.copy()
+        mu_loops = self._mu[robust]
+        online_stage = StageReport(
+            float(mu_loops.min()) if len(mu_loops) else np.nan,
+            float(mu_loops.mean()) if len(mu_loops) else np.nan,
+            float(mu_loops.max()) if len(mu_loops) else np.nan,
+            iterations=int(sum(self._update_iterations)),
+            cost=float(np.sum(KernelLoss(self._kernel, self._mu, robust).cost(self._r))),
+            time_s=1e-3 * float(sum(self._update_ms)),
+            status=self._last_status if self._last_status >= 0 else 1,
+            active_edges=len(self._edges),
+        )
+        stages: tuple[StageReport, ...] = (online_stage,)
+        poses = self._T
+        robust_r = self._r.copy()
+        weights = KernelLoss(self._kernel, self._mu, robust).weight(robust_r)
+        status = online_stage.status
+        settled = True
+        if decide and robust.any():
+            decision = decide_outliers(
+                graph, poses, robust, self.options, self.gnc_options, self.linear_solver, factors
+            )
+            poses, inliers, settled = decision.poses, decision.inliers, decision.settled
+            stages += decision.reports
+            if decision.reports:
+                status = decision.reports[-1].status
+        r = factors.whitened_norms(factors.residuals(poses))
+        if not (decide and robust.any()):
+            inliers = classify_inliers(r, robust, self._d, self.gnc_options)
+        initial_r = factors.whitened_norms(factors.residuals(self._T_initial))
+        # Rows sorted by vertex id, as every PoseGraph egnc reads; edges keep insertion order.
+        order = np.argsort(self._vertex_ids, kind="stable")
+        new_row = np.empty_like(order)
+        new_row[order] = np.arange(len(order))
+        fixed = np.zeros(len(order), dtype=bool)
+        fixed[new_row[self._gauge]] = new_row[self._gauge] != 0
+        result_poses = from_matrices(self.dim, poses)[order]
+        sorted_graph = PoseGraph(
+            dim=self.dim,
+            vertex_ids=self._vertex_ids[order],
+            poses=from_matrices(self.dim, self._T_initial)[order],
+            edges=new_row[self._edges],
+            measurements=self._measurements,
+            information=self._information,
+            fixed=fixed,
+        )
+        initial_fits = classify_inliers(initial_r, robust, self._d, self.gnc_options)
+        known = ~robust
+        return Result(
+            graph=sorted_graph.with_poses(result_poses),
+            method=self.method,
+            linear_solver=self.linear_solver,
+            residual_norms=r,
+            weights=weights,
+            mu=self.mu,
+            known_inliers=known,
+            inliers=inliers,
+            initial_cost=float(0.5 * np.sum(initial_r**2)),
+            cost=float(0.5 * np.sum(r**2)),
+            accepted_cost=float(0.5 * np.sum(r[inliers] ** 2)),
+            truncated_cost=truncated_cost(r, robust, self._d, self.gnc_options.outlier_quantile),
+            iterations=sum(stage.iterations for stage in stages),
+            stages=stages,
+            status=status,
+            message=STATUS_MESSAGES.get(status, "no solve needed"),
+            time_s=online_stage.time_s + time.perf_counter() - started,
+            timings={},
+            robust_residual_norms=robust_r,
+            warnings=solve_warnings(
+                sorted_graph, stages, robust, inliers, initial_r, r, initial_fits, result_poses, settled=settled
+            ),
+            init="online",
+        )
+
+    # ------------------------------------------------------------------ checkpoints
+
+    def save(self, path: str | Path, meta: dict | None = None) -> None:
+        """Write the whole state to `path` (NumPy `.npz`), atomically: the file is complete or untouched.
+
+        Args:
+            path: the checkpoint file.
+            meta: JSON-serializable data stored alongside (e.g. how far a replay got).
+
+        Raises:
+            EgncError: entries were added after the last update (update first).
+        """
+        if self._pending:
+            raise EgncError("entries were added after the last update: call update() before save()")
+        settings = {
+            "version": CHECKPOINT_VERSION,
+            "dim": self.dim,
+            "method": self.method,
+            "linear_solver": self.linear_solver,
+            "options": asdict(self.options),
+            "gnc_options": asdict(self.gnc_options),
+            "online_options": asdict(self.online_options),
+            "gauge": self._gauge,
+            "has_prior": self._has_prior,
+            "steps": self._steps,
+            "last_status": self._last_status,
+            "meta": meta or {},
+        }
+        arrays = {
+            "vertex_ids": self._vertex_ids,
+            "T": self._T,
+            "T_initial": self._T_initial,
+            "edges": self._edges,
+            "measurements": self._measurements,
+            "Z_inv": self._Z_inv,
+            "information": self._information,
+            "robust": self._robust,
+            "mu": self._mu,
+            "mu_init": self._mu_init,
+            "r": self._r,
+            "update_ms": np.array(self._update_ms),
+            "update_iterations": np.array(self._update_iterations, dtype=np.int64),
+        }
+        with atomic_binary_file(Path(path)) as out:
+            np.savez(out, settings=np.array(json.dumps(settings)), **arrays)  # type: ignore[arg-type]
+
+    @classmethod
+    def load(cls, path: str | Path) -> tuple[OnlineSolver, dict]:
+        """Restore a solver written by `save`; returns it and the `meta` saved with it.
+
+        Raises:
+            EgncError: the file is not an egnc checkpoint of this version, or cannot be read.
+        """
+        try:
+            with np.load(Path(path), allow_pickle=False) as data:
+                settings = json.loads(str(data["settings"]))
+                arrays = {name: data[name] for name in data.files if name != "settings"}
+        except (OSError, ValueError, KeyError) as error:
+            raise EgncError(f"{path}: not a readable egnc checkpoint ({error})") from None
+        if settings.get("version") != CHECKPOINT_VERSION:
+            raise EgncError(f"{path}: checkpoint version {settings.get('version')}, expected {CHECKPOINT_VERSION}")
+        solver = cls(
+            settings["dim"],
+            settings["method"],
+            linear_solver=settings["linear_solver"],
+            options=SolverOptions(**settings["options"]),
+            gnc_options=GncOptions(**settings["gnc_options"]),
+            online_options=OnlineOptions(**settings["online_options"]),
+        )
+        solver._vertex_ids = arrays["vertex_ids"]
+        solver._row = {vertex_id: row for row, vertex_id in enumerate(solver._vertex_ids.tolist())}
+        solver._known_ids = set(solver._row)
+        solver._T, solver._T_initial = arrays["T"], arrays["T_initial"]
+        solver._edges, solver._measurements = arrays["edges"], arrays["measurements"]
+        solver._Z_inv, solver._information = arrays["Z_inv"], arrays["information"]
+        solver._robust, solver._mu, solver._mu_init = arrays["robust"], arrays["mu"], arrays["mu_init"]
+        solver._r = arrays["r"]
+        solver._update_ms = arrays["update_ms"].tolist()
+        solver._update_iterations = arrays["update_iterations"].tolist()
+        solver._gauge, solver._has_prior = settings["gauge"], settings["has_prior"]
+        solver._steps, solver._last_status = settings["steps"], settings["last_status"]
+        return solver, settings["meta"]
+
+
+def _ids(values: ArrayLike, width: int) -> np.ndarray:
+    """Vertex ids as int64, `(K,)` for `width` 1 or `(K, 2)` for 2; non-negative."""
+    array = np.asarray(values)
+    if array.dtype.kind not in "iu":
+        raise GraphError(f"vertex ids must be integers, got {array.dtype}")
+    array = array.astype(np.int64).reshape(-1) if width == 1 else array.astype(np.int64).reshape(-1, 2)
+    if np.any(array < 0):
+        raise GraphError("vertex ids must be non-negative")
+    return array
+
+
+def _array(values: ArrayLike, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """`values` as float64 of exactly `shape`, finite."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != shape:
+        raise GraphError(f"{name} has shape {array.shape}, expected {shape}")
+    if not np.all(np.isfinite(array)):
+        raise GraphError(f"{name} holds NaN or infinite values")
+    return array

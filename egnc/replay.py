@@ -1,0 +1,201 @@
+"""Replay a whole pose graph through the online solver, step by step, with checkpoints.
+
+A step is one new pose: the edges are grouped by their later vertex (the larger pose row, i.e.
+vertex id, of the two they join), groups in increasing order, and within a group the known
+inliers (odometry) come first, then the loop closures, each in file order. One step is one
+`OnlineSolver.update()`, as riSAM processes a log one pose at a time. For an IRL log this is
+its own time order; for a g2o file it is the order in which a robot numbering its poses would
+have made the measurements.
+
+The `Result` of a replay lists the edges in the graph's own (file) order, so its edge indices,
+`rejected_edges` included, are those of `egnc.solve` on the same graph.
+
+Checkpoints: with `checkpoint`, the solver's whole state is written there (atomically) every
+`checkpoint_every` steps and after the last one, together with how many steps were done and a
+fingerprint of the graph. A replay given an existing checkpoint of the same graph and settings
+resumes after its last step; since every update is deterministic, the final result equals an
+uninterrupted run's.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from egnc.api import Result
+from egnc.errors import EgncError, GraphError
+from egnc.gnc import GncOptions
+from egnc.graph import PoseGraph
+from egnc.least_squares import SolverOptions
+from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
+
+__all__ = ["ReplayOutcome", "latency_summary", "replay", "replay_steps"]
+
+StepCallback = Callable[[int, int, UpdateReport], None]
+"""Receives `(step, total_steps, report)` after every update (progress display)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ReplayOutcome:
+    """The end of a replay.
+
+    Attributes:
+        result: the final `Result` (batch decision on the final estimate), edges in file order.
+        solver: the online solver, at the end of the replay.
+        steps: updates over the whole replay (including those before a resume).
+        resumed_from: steps already done in the checkpoint the replay resumed from (0 if none).
+        update_ms: `(steps,)` wall time of every update, milliseconds.
+        update_iterations: `(steps,)` accepted solver steps of every update.
+        total_s: sum of the update times, seconds (reading, the final decision and writing excluded).
+    """
+
+    result: Result
+    solver: OnlineSolver
+    steps: int
+    resumed_from: int
+    update_ms: np.ndarray
+    update_iterations: np.ndarray
+    total_s: float
+
+
+def replay_steps(graph: PoseGraph, known_inliers: np.ndarray) -> list[np.ndarray]:
+    """The edges of each step, in replay order (module docstring): a list of `(K_s,)` edge indices."""
+    later = graph.edges.max(axis=1)
+    order = np.lexsort((np.arange(graph.num_edges), ~known_inliers, later))
+    boundaries = np.flatnonzero(np.diff(later[order])) + 1
+    return np.split(order, boundaries)
+
+
+def fingerprint(graph: PoseGraph, known_inliers: np.ndarray) -> str:
+    """A SHA-256 of what a replay depends on: the edges, their measurements and information, the roles."""
+    digest = hashlib.sha256()
+    for array in (graph.vertex_ids, graph.edges, graph.measurements, graph.information, known_inliers, graph.fixed):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def replay(
+    graph: PoseGraph,
+    method: str = "egnc",
+    *,
+    known_inliers: np.ndarray | None = None,
+    linear_solver: str = "auto",
+    options: SolverOptions | None = None,
+    gnc_options: GncOptions | None = None,
+    online_options: OnlineOptions | None = None,
+    checkpoint: str | Path | None = None,
+    checkpoint_every: int = 50,
+    stop_after: int | None = None,
+    on_step: StepCallback | None = None,
+) -> ReplayOutcome:
+    """Replay `graph` step by step through an `OnlineSolver` and decide at the end.
+
+    Args:
+        graph: the pose graph; its gauge pose (the fixed one, else row 0) is the prior.
+        method: `"egnc"` or `"risam"`.
+        known_inliers: `(E,)` bool, edges added as odometry (default: `graph.is_odometry`).
+        linear_solver, options, gnc_options, online_options: as for `OnlineSolver`.
+        checkpoint: a file to write the state to, and to resume from when it exists.
+        checkpoint_every: steps between two checkpoint writes (and one after the last step).
+        stop_after: stop after this many steps in all (for tests of interrupted runs); the
+            checkpoint is written, and the result is that of the steps done, its edges in
+            insertion (replay) order.
+        on_step: called after every update with `(step, total_steps, report)`.
+
+    Raises:
+        EgncError: the checkpoint belongs to another graph or other settings.
+        GraphError: a step adds a loop closure to a pose no earlier edge reached.
+    """
+    known = graph.is_odometry if known_inliers is None else np.asarray(known_inliers, dtype=bool)
+    if known.shape != (graph.num_edges,):
+        raise EgncError(f"known_inliers must be ({graph.num_edges},) bool, got shape {known.shape}")
+    if checkpoint_every < 1:
+        raise EgncError(f"checkpoint_every must be at least 1, got {checkpoint_every}")
+    touched = np.zeros(graph.num_poses, dtype=bool)
+    touched[graph.edges.ravel()] = True
+    if not touched.all():
+        raise GraphError(f"{int((~touched).sum())} poses no edge touches: a replay cannot place them")
+    steps = replay_steps(graph, known)
+    settings = {
+        "fingerprint": fingerprint(graph, known),
+        "method": method,
+    }
+    solver: OnlineSolver | None = None
+    done = 0
+    path = None if checkpoint is None else Path(checkpoint)
+    if path is not None and path.exists():
+        solver, meta = OnlineSolver.load(path)
+        if {key: meta.get(key) for key in settings} != settings:
+            raise EgncError(f"{path}: the checkpoint belongs to another graph or method; remove it or choose another")
+        done = int(meta["steps_done"])
+    if solver is None:
+        solver = OnlineSolver(
+            graph.dim,
+            method,
+            linear_solver=linear_solver,
+            options=options,
+            gnc_options=gnc_options,
+            online_options=online_options,
+        )
+        gauge = int(np.flatnonzero(graph.fixed)[0]) if graph.fixed.any() else 0
+        solver.add_prior(int(graph.vertex_ids[gauge]), graph.poses[gauge])
+    resumed_from = done
+    ids, Z, info = graph.vertex_ids[graph.edges], graph.measurements, graph.information
+    order = np.concatenate(steps) if steps else np.zeros(0, dtype=np.int64)
+    last = len(steps) if stop_after is None else min(len(steps), stop_after)
+    for step in range(done, last):
+        edges = steps[step]
+        odometry, loops = edges[known[edges]], edges[~known[edges]]
+        if len(odometry):
+            solver.add_odometry_batch(ids[odometry], Z[odometry], info[odometry])
+        if len(loops):
+            solver.add_loops(ids[loops], Z[loops], info[loops])
+        report = solver.update()
+        done = step + 1
+        if on_step is not None:
+            on_step(done, len(steps), report)
+        if path is not None and (done % checkpoint_every == 0 or done == last):
+            solver.save(path, meta={**settings, "steps_done": done})
+    inserted = order[: solver.num_edges]
+    result = _in_file_order(solver.result(), inserted, graph) if done == len(steps) else solver.result()
+    update_ms = solver.update_ms
+    return ReplayOutcome(
+        result=result,
+        solver=solver,
+        steps=solver.steps,
+        resumed_from=resumed_from,
+        update_ms=update_ms,
+        update_iterations=solver.update_iterations,
+        total_s=1e-3 * float(update_ms.sum()),
+    )
+
+
+def _in_file_order(result: Result, inserted: np.ndarray, graph: PoseGraph) -> Result:
+    """`result` (edges in insertion order; `inserted[k]` is the file index of edge k) with edges in file order."""
+    position = np.empty_like(inserted)
+    position[inserted] = np.arange(len(inserted))  # file edge f was inserted as edge position[f]
+    solved = result.graph
+    if not np.array_equal(solved.vertex_ids, graph.vertex_ids):
+        raise EgncError("the replay did not take in every pose of the graph")
+    reordered = replace(
+        graph,
+        poses=solved.poses,
+        fixed=solved.fixed,
+    )
+    per_edge = {
+        name: getattr(result, name)[position]
+        for name in ("residual_norms", "weights", "mu", "known_inliers", "inliers", "robust_residual_norms")
+    }
+    return replace(result, graph=reordered, **per_edge)
+
+
+def latency_summary(update_ms: np.ndarray) -> dict[str, float]:
+    """`{"p50", "p99", "max"}` of per-update times in milliseconds (all 0 without updates)."""
+    if len(update_ms) == 0:
+        return {"p50": 0.0, "p99": 0.0, "max": 0.0}
+    p50, p99 = np.percentile(update_ms, [50, 99])
+    return {"p50": float(p50), "p99": float(p99), "max": float(np.max(update_ms))}

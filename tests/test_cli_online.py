@@ -1,0 +1,149 @@
+"""`egnc-solve` on IRL logs, in batch and with `--online`, through a subprocess."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import egnc
+from egnc.datasets import read_labels
+from egnc.io import IrlLog, read_irl, write_irl
+from egnc.metrics import precision_recall
+
+DATASETS = Path(__file__).parents[1] / "datasets"
+ONLINE_KEYS = {"steps", "resumed_from", "total_s", "iterations", "update_ms"}
+
+
+def egnc_solve(*args: str | Path) -> subprocess.CompletedProcess:
+    """Run `egnc-solve args...` with this interpreter."""
+    return subprocess.run(
+        [sys.executable, "-m", "egnc.cli.solve", *map(str, args)],
+        capture_output=True,
+        text=True,
+        stdin=subprocess.DEVNULL,
+        timeout=300,
+    )
+
+
+def rejected_mask(report: Path, num_edges: int) -> np.ndarray:
+    mask = np.zeros(num_edges, dtype=bool)
+    mask[json.loads(report.read_text())["rejected_edges"]] = True
+    return mask
+
+
+@pytest.fixture(scope="module")
+def grid_log(tmp_path_factory) -> tuple[Path, IrlLog]:
+    """`grid2d_outliers.g2o` written as an IRL log with its labels (in a temporary folder)."""
+    graph = egnc.read_g2o(DATASETS / "grid2d_outliers.g2o")
+    labels, _ = read_labels(DATASETS / "grid2d_outliers.labels.json")
+    path = tmp_path_factory.mktemp("irl") / "grid2d_outliers.irl"
+    write_irl(IrlLog.from_graph(graph, labels, date="2026-11-25"), path)
+    return path, read_irl(path)
+
+
+def test_batch_solve_of_riSAMs_manhattan_log(dataset_path, tmp_path):
+    path = dataset_path("manhattan_noisy.irl")
+    log = read_irl(path)
+    report = tmp_path / "report.json"
+    run = egnc_solve(path, "--report", report, "-o", tmp_path / "out.g2o", "-q")
+    assert run.returncode == 0, run.stderr
+    content = json.loads(report.read_text())
+    assert content["edges"] == log.num_edges and "online" not in content
+    assert content["known_inliers"] == int(log.is_odometry.sum())  # the ODOMETRY entries
+    precision, recall = precision_recall(rejected_mask(report, log.num_edges), log.is_outlier)
+    assert precision == 1.0 and recall == 1.0
+    assert egnc.read_g2o(tmp_path / "out.g2o").num_edges == log.num_edges
+
+
+def test_an_irl_log_is_recognised_by_its_header_whatever_its_name(grid_log, tmp_path):
+    path, log = grid_log
+    renamed = tmp_path / "log.txt"
+    renamed.write_bytes(path.read_bytes())
+    report = tmp_path / "report.json"
+    run = egnc_solve(renamed, "--report", report, "-q")
+    assert run.returncode == 0, run.stderr
+    assert precision_recall(rejected_mask(report, log.num_edges), log.is_outlier) == (1.0, 1.0)
+
+
+def test_online_replay_of_a_log_reports_latency_and_the_final_decision(grid_log, tmp_path):
+    path, log = grid_log
+    report, trajectory, edges = tmp_path / "report.json", tmp_path / "t.tum", tmp_path / "e.csv"
+    run = egnc_solve(path, "--online", "--report", report, "--trajectory", trajectory, "--edges", edges)
+    assert run.returncode == 0, run.stderr
+    content = json.loads(report.read_text())
+    online = content["online"]
+    assert set(online) == ONLINE_KEYS
+    assert online["steps"] == log.graph.num_poses - 1  # one update per pose after the prior's
+    latency = online["update_ms"]
+    assert 0.0 < latency["p50"] <= latency["p99"] <= latency["max"] <= 1e3 * online["total_s"]
+    assert online["iterations"] > 0 and online["resumed_from"] == 0
+    assert precision_recall(rejected_mask(report, log.num_edges), log.is_outlier) == (1.0, 1.0)
+    assert "online:" in run.stdout and "step " in run.stderr
+    assert len(trajectory.read_text().splitlines()) == log.graph.num_poses
+    assert len(edges.read_text().splitlines()) == log.num_edges + 1
+
+
+def test_online_replay_of_a_g2o_file_keeps_file_edge_order(tmp_path):
+    graph = egnc.read_g2o(DATASETS / "grid3d_outliers.g2o")
+    labels, _ = read_labels(DATASETS / "grid3d_outliers.labels.json")
+    report = tmp_path / "report.json"
+    run = egnc_solve(DATASETS / "grid3d_outliers.g2o", "--online", "--method", "risam", "--report", report, "-q")
+    assert run.returncode == 0, run.stderr
+    assert run.stdout == "" and json.loads(report.read_text())["method"] == "risam"
+    assert precision_recall(rejected_mask(report, graph.num_edges), labels) == (1.0, 1.0)
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--online", "--method", "gnc-gm"], "--online replays"),
+        (["--checkpoint", "x.npz"], "add --online"),
+        (["--online", "--init", "chordal"], "--init does not apply"),
+    ],
+)
+def test_options_that_cannot_apply_are_refused(options, message):
+    run = egnc_solve(DATASETS / "grid2d.g2o", *options)
+    assert run.returncode == 1 and message in run.stderr
+
+
+def _run_until(args: list[str | Path], kill_at_step: int) -> int:
+    """Start `egnc-solve args`, SIGKILL it once its progress reports step `kill_at_step` or later; its exit code."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "egnc.cli.solve", *map(str, args)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        text=True,
+    )
+    assert process.stderr is not None
+    for line in process.stderr:
+        if line.startswith("step ") and int(line.split()[1].split("/")[0]) >= kill_at_step:
+            process.kill()
+            break
+    process.stderr.close()
+    return process.wait(timeout=300)
+
+
+def test_a_killed_replay_resumes_to_the_uninterrupted_result(tmp_path):
+    source = DATASETS / "grid2d_outliers.g2o"
+    whole_out, whole_report = tmp_path / "whole.g2o", tmp_path / "whole.json"
+    run = egnc_solve(source, "--online", "-o", whole_out, "--report", whole_report, "-q")
+    assert run.returncode == 0, run.stderr
+
+    checkpoint, out, report = tmp_path / "run.ckpt", tmp_path / "out.g2o", tmp_path / "report.json"
+    args = [source, "--online", "-o", out, "--report", report, "--checkpoint", checkpoint, "--checkpoint-every", "20"]
+    # Progress lines come every tenth of the 499 steps: kill after the 2nd, then (resumed) the 6th.
+    assert _run_until(args, 98) == -9 and checkpoint.exists() and not out.exists()
+    assert _run_until(args, 294) == -9 and not out.exists()
+    run = egnc_solve(*args)
+    assert run.returncode == 0, run.stderr
+    online = json.loads(report.read_text())["online"]
+    assert 280 <= online["resumed_from"] < 499 and online["steps"] == 499
+    np.testing.assert_allclose(egnc.read_g2o(out).poses, egnc.read_g2o(whole_out).poses, atol=1e-9, rtol=0)
+    assert json.loads(report.read_text())["rejected_edges"] == json.loads(whole_report.read_text())["rejected_edges"]
+    assert online["iterations"] == json.loads(whole_report.read_text())["online"]["iterations"]

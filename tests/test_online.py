@@ -1,0 +1,289 @@
+"""The online solver (`egnc.online`) and the replay of whole graphs through it (`egnc.replay`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import egnc
+from egnc.datasets import add_false_loops
+from egnc.datasets.labels import read_labels
+from egnc.errors import EgncError, GraphError
+from egnc.factors import from_matrices, group_of, to_matrices
+from egnc.graph import PoseGraph
+from egnc.linear_solvers import cholmod_available
+from egnc.metrics import precision_recall
+from egnc.online import OnlineOptions, OnlineSolver
+from egnc.replay import replay, replay_steps
+
+DATA = Path(__file__).parents[1] / "datasets"
+RISAM_SEQUENCE = [0.0, 0.12, 0.384, 0.9648, 1.0]
+
+
+def _square(dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Odometry of a unit square walked counter-clockwise (4 steps back to the start), and its information."""
+    if dim == 2:
+        step = np.array([1.0, 0.0, np.pi / 2])
+        return np.tile(step, (4, 1)), np.diag([100.0, 100.0, 400.0])
+    # A quarter turn about the axis n = (1, 1, 1) / sqrt(3) with a translation orthogonal to n:
+    # four such steps compose to the identity, in a loop that is not planar in any frame axis.
+    axis = np.ones(3) / np.sqrt(3.0)
+    step = np.concatenate(([1.0, -1.0, 0.0], axis * np.sin(np.pi / 4), [np.cos(np.pi / 4)]))
+    return np.tile(step, (4, 1)), np.diag([100.0, 100.0, 100.0, 400.0, 400.0, 400.0])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("method", ["egnc", "risam"])
+def test_consistent_loop_is_kept_and_the_map_is_the_composed_odometry(dim, method):
+    odometry, information = _square(dim)
+    solver = OnlineSolver(dim, method)
+    solver.add_prior(0, from_matrices(dim, np.eye(dim + 1)))
+    for k in range(3):
+        solver.add_odometry(k, k + 1, odometry[k], information)
+    solver.update()
+    # The loop 3 -> 0 measures exactly the fourth step: every residual is zero at the composed map.
+    loop = solver.add_loop(3, 0, odometry[3], information)
+    report = solver.update()
+    T = to_matrices(dim, solver.poses)
+    Z = to_matrices(dim, odometry[0])
+    expected = np.stack([np.linalg.matrix_power(Z, k) for k in range(4)])
+    np.testing.assert_allclose(T, expected, atol=1e-12)
+    assert solver.residual_norms[loop] < 1e-9
+    assert loop not in solver.rejected
+    assert report.new_loops.tolist() == [loop]
+    assert report.mu_history[0, 0] == 0.0 and report.mu_history[-1, 0] == 1.0
+    result = solver.result()
+    assert isinstance(result, egnc.Result)
+    assert result.inliers.all() and result.graph.num_poses == 4 and result.graph.num_edges == 4
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_an_update_with_only_new_odometry_solves_nothing(dim):
+    odometry, information = _square(dim)
+    solver = OnlineSolver(dim, "egnc")
+    solver.add_prior(0, from_matrices(dim, np.eye(dim + 1)))
+    solver.add_odometry(0, 1, odometry[0], information)
+    solver.add_odometry(1, 2, odometry[1], information)
+    solver.add_loop(2, 0, odometry[0], information)  # a wrong loop, so the map is not trivially exact
+    first = solver.update()
+    assert first.iterations > 0 and first.reanalysed
+    before = solver.poses
+    solver.add_odometry(2, 3, odometry[2], information)
+    report = solver.update()
+    assert report.stages == () and report.iterations == 0 and not report.reanalysed and report.status == -1
+    assert report.new_poses == 1 and report.new_loops.size == 0
+    np.testing.assert_array_equal(solver.poses[:3], before)
+    group = group_of(dim)
+    T = to_matrices(dim, solver.poses)
+    np.testing.assert_allclose(group.between(T[2], T[3]), to_matrices(dim, odometry[2]), atol=1e-12)
+
+
+def test_odometry_between_known_poses_is_solved_without_graduation():
+    odometry, information = _square(2)
+    solver = OnlineSolver(2, "egnc")
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    for k in range(3):
+        solver.add_odometry(k, k + 1, odometry[k], information)
+    solver.update()
+    solver.add_odometry(3, 0, odometry[3] + [0.2, 0.0, 0.0], information)  # a known inlier that disagrees a bit
+    report = solver.update()
+    assert len(report.stages) == 1 and report.iterations > 0 and report.graduated == 0
+    assert solver.residual_norms[-1] > 0.1 and solver.rejected.size == 0
+
+
+def _chain(method: str, linear_solver: str = "auto", regraduate: str = "reference") -> tuple[OnlineSolver, np.ndarray]:
+    """Eleven poses along x, 1 m apart; the x variance between pose 0 and 10 is 0.01 m^2 by odometry."""
+    options = OnlineOptions(regraduate=regraduate)  # type: ignore[arg-type]
+    solver = OnlineSolver(2, method, linear_solver=linear_solver, online_options=options)
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    for k in range(10):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
+    solver.update()
+    return solver, np.diag([100.0, 1e4, 1e4])  # loops: x standard deviation 0.1 m
+
+
+@pytest.mark.parametrize("regraduate", ["reference", "new"])
+@pytest.mark.parametrize("method", ["egnc", "risam"])
+def test_a_loop_rejected_early_comes_back_when_later_loops_support_it(method, regraduate):
+    solver, information = _chain(method, regraduate=regraduate)
+    first = solver.add_loop(0, 10, [10.85, 0.0, 0.0], information)
+    solver.update()
+    assert first in solver.rejected  # alone it disagrees with the odometry: r^2 about 70
+    comeback = None
+    for k in range(10):
+        solver.add_loop(0, 10, [10.85, 0.0, 0.0], information)
+        solver.update()
+        if first not in solver.rejected:
+            comeback = k
+            break
+    assert comeback is not None and comeback >= 1, "the loop must come back, and not at the very next one"
+    assert solver.rejected.size == 0
+    assert solver.poses[10, 0] > 10.6  # the map followed the loops
+    assert solver.result().inliers.all()
+
+
+@pytest.mark.parametrize("regraduate", ["reference", "new"])
+@pytest.mark.parametrize("method", ["egnc", "risam"])
+def test_a_false_loop_accepted_early_leaves_when_true_loops_arrive(method, regraduate):
+    # The odometry says pose 10 is at x = 10 m; the truth (and the true loops) say 9.8 m.
+    solver, true_information = _chain(method, regraduate=regraduate)
+    false_information = np.diag([400.0, 1e4, 1e4])  # x standard deviation 0.05 m
+    false = solver.add_loop(0, 10, [10.1, 0.0, 0.0], false_information)
+    solver.update()
+    assert false not in solver.rejected  # at arrival it fits the odometry (r^2 = 4)
+    left = None
+    for k in range(8):
+        solver.add_loop(0, 10, [9.8, 0.0, 0.0], true_information)
+        solver.update()
+        if left is None and false in solver.rejected:
+            left = k
+    assert left is not None and left >= 1, "the false loop must leave, and not at the first true loop"
+    assert solver.rejected.tolist() == [false]
+    assert solver.result().rejected_edges.tolist() == [false]
+    assert abs(solver.poses[10, 0] - 9.8) < 0.05
+
+
+def test_schedules_graduate_new_loops_by_their_own_rule():
+    solver, information = _chain("risam")
+    solver.add_loop(0, 10, [10.05, 0.0, 0.0], information)
+    report = solver.update()
+    np.testing.assert_allclose(report.mu_history[:, 0], RISAM_SEQUENCE, atol=1e-12)
+
+    solver, information = _chain("egnc")
+    gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
+    report = solver.update()
+    assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after its first stage: skips mu*
+    assert gross in solver.rejected
+
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=True))
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    for k in range(10):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
+    gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
+    report = solver.update()
+    assert report.mu_history[:, 0].tolist() == [1.0]  # strong at arrival: no mu = 0 stage
+    assert gross in solver.rejected
+
+    # Stiff odometry (x variance 1e-4 m^2 from pose 0 to 10): the loop's residual hardly shrinks at
+    # mu = 0, and r = 2.2 lies between c / sqrt(3) = 1.73 and the strong threshold sqrt(6.25) = 2.5.
+    solver = OnlineSolver(2, "egnc")
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    for k in range(10):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1e5, 1e4, 1e4]))
+    solver.add_loop(0, 10, [10.22, 0.0, 0.0], information)
+    report = solver.update()
+    # Inside the band: 0, then mu*(r) at the first stage's residual (in (1/2, 1) above c / sqrt(3)), then 1.
+    history = report.mu_history[:, 0]
+    assert history.shape == (3,) and history[0] == 0.0 and history[2] == 1.0
+    assert 0.5 < history[1] < 1.0
+
+
+def test_egnc_schedule_takes_fewer_iterations_than_risam_on_the_same_updates():
+    graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 200)
+    iterations = {method: int(replay(graph, method).update_iterations.sum()) for method in ("egnc", "risam")}
+    assert iterations["egnc"] < iterations["risam"]
+
+
+@pytest.mark.parametrize(("name", "method"), [("grid2d_outliers", "egnc"), ("grid3d_outliers", "risam")])
+def test_replay_decides_like_batch_on_the_shipped_graphs(name, method):
+    graph = egnc.read_g2o(DATA / f"{name}.g2o")
+    labels, _ = read_labels(DATA / f"{name}.labels.json")
+    outcome = replay(graph, method)
+    precision, recall = precision_recall(~outcome.result.inliers, labels)
+    assert precision == 1.0 and recall == 1.0
+    batch = egnc.solve(graph, method)
+    np.testing.assert_array_equal(outcome.result.inliers, batch.inliers)
+    np.testing.assert_allclose(outcome.result.graph.poses, batch.graph.poses, atol=1e-8)
+    # Edges come back in file order: the result's graph is the input's.
+    np.testing.assert_array_equal(outcome.result.graph.edges, graph.edges)
+    assert outcome.steps == len(replay_steps(graph, graph.is_odometry))
+    assert outcome.update_ms.shape == (outcome.steps,)
+
+
+def test_replay_of_csail_with_30_percent_false_loops(dataset_path):
+    graph = egnc.read_g2o(dataset_path("csail.g2o"))
+    reference = egnc.solve(graph, "l2").graph.poses
+    corrupted = add_false_loops(graph, 30, seed=0, reference_poses=reference)
+    outcome = replay(corrupted.graph, "egnc")
+    precision, recall = precision_recall(~outcome.result.inliers, corrupted.is_outlier)
+    assert precision >= 0.99 and recall >= 0.99
+    # Most updates only extend the trajectory and cost nothing.
+    assert np.count_nonzero(outcome.update_iterations == 0) > 0.5 * outcome.steps
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="scikit-sparse (CHOLMOD) not installed")
+def test_both_linear_backends_give_the_same_online_estimate():
+    estimates = []
+    for backend in ("cholmod", "scipy"):
+        solver, information = _chain("egnc", backend)
+        assert solver.linear_solver == backend
+        solver.add_loop(0, 10, [10.2, 0.0, 0.0], information)
+        solver.add_loop(2, 9, [7.5, 0.0, 0.0], information)
+        solver.update()
+        estimates.append(solver.poses)
+    np.testing.assert_allclose(estimates[0], estimates[1], atol=1e-9)
+
+
+def _prefix(graph: PoseGraph, num_poses: int) -> PoseGraph:
+    """The subgraph of the first `num_poses` rows and the edges among them."""
+    keep = (graph.edges < num_poses).all(axis=1)
+    return PoseGraph(
+        graph.dim,
+        graph.vertex_ids[:num_poses],
+        graph.poses[:num_poses],
+        graph.edges[keep],
+        graph.measurements[keep],
+        graph.information[keep],
+    )
+
+
+def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path):
+    graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 150)
+    whole = replay(graph, "egnc")
+    path = tmp_path / "state.npz"
+    first = replay(graph, "egnc", checkpoint=path, checkpoint_every=7, stop_after=60)
+    assert first.steps == 60 and path.exists()
+    resumed = replay(graph, "egnc", checkpoint=path, checkpoint_every=7)
+    assert resumed.resumed_from == 60 and resumed.steps == whole.steps
+    np.testing.assert_allclose(resumed.result.graph.poses, whole.result.graph.poses, atol=1e-9, rtol=0)
+    np.testing.assert_array_equal(resumed.result.inliers, whole.result.inliers)
+    np.testing.assert_array_equal(resumed.update_iterations, whole.update_iterations)
+    with pytest.raises(EgncError, match="another graph"):
+        replay(graph, "risam", checkpoint=path)
+
+
+def test_save_and_load_keep_every_number(tmp_path):
+    solver, information = _chain("risam")
+    solver.add_loop(0, 10, [10.3, 0.0, 0.0], information)
+    solver.update()
+    solver.save(tmp_path / "s.npz", meta={"note": "x"})
+    loaded, meta = OnlineSolver.load(tmp_path / "s.npz")
+    assert meta == {"note": "x"} and loaded.method == "risam" and loaded.steps == solver.steps
+    np.testing.assert_array_equal(loaded.poses, solver.poses)
+    np.testing.assert_array_equal(loaded.mu, solver.mu)
+    for s in (solver, loaded):
+        s.add_loop(1, 8, [7.2, 0.0, 0.0], information)
+        s.update()
+    np.testing.assert_array_equal(loaded.poses, solver.poses)
+    with pytest.raises(EgncError, match="not a readable"):
+        OnlineSolver.load(tmp_path / "missing.npz")
+
+
+def test_inputs_are_checked():
+    solver = OnlineSolver(2, "egnc")
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    with pytest.raises(GraphError, match="not known"):
+        solver.add_loop(0, 5, [1.0, 0.0, 0.0], np.eye(3))
+    with pytest.raises(GraphError, match="two unknown"):
+        solver.add_odometry(4, 5, [1.0, 0.0, 0.0], np.eye(3))
+    with pytest.raises(GraphError, match="positive definite"):
+        solver.add_odometry(0, 1, [1.0, 0.0, 0.0], -np.eye(3))
+    with pytest.raises(GraphError, match="second prior"):
+        solver.add_prior(0, [0.0, 0.0, 0.0])
+    solver.add_odometry(0, 1, [1.0, 0.0, 0.0], np.eye(3))
+    with pytest.raises(EgncError, match="update"):
+        solver.result()
+    with pytest.raises(EgncError, match="online method"):
+        OnlineSolver(2, "gnc-gm")
