@@ -6,6 +6,7 @@ import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 
@@ -132,6 +133,35 @@ class Result:
     def rejected_edges(self) -> np.ndarray:
         """0-based indices, in input-file order, of the edges rejected as outliers."""
         return np.flatnonzero(~self.inliers)
+
+
+class ResultCosts(TypedDict):
+    """The cost fields of a `Result` (see its docstring)."""
+
+    initial_cost: float
+    cost: float
+    accepted_cost: float
+    truncated_cost: float
+
+
+def result_costs(
+    initial_r: np.ndarray, r: np.ndarray, inliers: np.ndarray, robust: np.ndarray, d: int, quantile: float
+) -> ResultCosts:
+    """The cost fields of a `Result` from `(E,)` residual norms at the guess and at the solution.
+
+    Args:
+        initial_r, r: `(E,)` whitened residual norms at the initial guess and at the solution.
+        inliers: `(E,)` bool, the accepted edges.
+        robust: `(E,)` bool, the loop closures.
+        d: residual dimension.
+        quantile: the outlier test's quantile (`GncOptions.outlier_quantile`).
+    """
+    return ResultCosts(
+        initial_cost=float(0.5 * np.sum(initial_r**2)),
+        cost=float(0.5 * np.sum(r**2)),
+        accepted_cost=float(0.5 * np.sum(r[inliers] ** 2)),
+        truncated_cost=truncated_cost(r, robust, d, quantile),
+    )
 
 
 def initial_guess(graph: PoseGraph, init: str, known_inliers: np.ndarray, linear_solver: str) -> np.ndarray:
@@ -283,10 +313,7 @@ def solve(
         mu=outcome.mu,
         known_inliers=known,
         inliers=inliers,
-        initial_cost=float(0.5 * np.sum(initial_r**2)),
-        cost=float(0.5 * np.sum(r**2)),
-        accepted_cost=float(0.5 * np.sum(r[inliers] ** 2)),
-        truncated_cost=truncated_cost(r, robust, graph.tangent_dim, gnc_options.outlier_quantile),
+        **result_costs(initial_r, r, inliers, robust, graph.tangent_dim, gnc_options.outlier_quantile),
         iterations=sum(stage.iterations for stage in stages),
         stages=stages,
         status=status,

@@ -55,8 +55,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from egnc.api import Result
-from egnc.decision import decide_outliers, truncated_cost
+from egnc.api import Result, result_costs
+from egnc.decision import decide_outliers
 from egnc.diagnostics import solve_warnings
 from egnc.errors import EgncError, GraphError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
@@ -690,10 +690,7 @@ class OnlineSolver:
             mu=self.mu,
             known_inliers=known,
             inliers=inliers,
-            initial_cost=float(0.5 * np.sum(initial_r**2)),
-            cost=float(0.5 * np.sum(r**2)),
-            accepted_cost=float(0.5 * np.sum(r[inliers] ** 2)),
-            truncated_cost=truncated_cost(r, robust, self._d, self.gnc_options.outlier_quantile),
+            **result_costs(initial_r, r, inliers, robust, self._d, self.gnc_options.outlier_quantile),
             iterations=sum(stage.iterations for stage in stages),
             stages=stages,
             status=status,
