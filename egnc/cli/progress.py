@@ -22,8 +22,8 @@ REFRESH_S = 0.1
 """Shortest interval between two rewrites of the live line, seconds."""
 
 
-class Progress:
-    """The `on_stage` and `on_iteration` callbacks of one solve, writing to `stream`.
+class _ProgressLine:
+    """What both progress writers keep: the stream, whether it is a terminal, the clock and its start.
 
     Args:
         stream: where to write (stderr); a terminal gets the live line.
@@ -35,8 +35,15 @@ class Progress:
         self._clock = clock
         self._live = stream.isatty()
         self._started = clock()
-        self._stage = 1
         self._last_refresh = -math.inf
+
+
+class Progress(_ProgressLine):
+    """The `on_stage` and `on_iteration` callbacks of one solve, writing to `stream` (`_ProgressLine`)."""
+
+    def __init__(self, stream: TextIO, clock=time.monotonic):
+        super().__init__(stream, clock)
+        self._stage = 1
         self._line_open = False
 
     def on_iteration(self, iterations: int, cost: float) -> None:
@@ -72,24 +79,18 @@ class Progress:
         self._last_refresh = -math.inf
 
 
-class StepProgress:
+class StepProgress(_ProgressLine):
     """The `on_step` callback of an online replay (`egnc.replay`), writing to `stream`.
 
     On a terminal one live line, rewritten at most `REFRESH_S` apart; in a log one line per tenth
     of the steps. Each line: steps done of all, poses and loop closures so far, loops rejected
     right now, the slowest update so far, and the elapsed time.
 
-    Args:
-        stream: where to write (stderr).
-        clock: seconds, monotonic (replaceable in tests).
+    Args: as `_ProgressLine`.
     """
 
     def __init__(self, stream: TextIO, clock=time.monotonic):
-        self._stream = stream
-        self._clock = clock
-        self._live = stream.isatty()
-        self._started = clock()
-        self._last_refresh = -math.inf
+        super().__init__(stream, clock)
         self._slowest_ms = 0.0
         self._loops = 0
 
