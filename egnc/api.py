@@ -282,16 +282,12 @@ def solve(
             )
             stages += reports
             if other is not None:
-                costs = {
-                    name: _truncated_cost(factors, kept.poses, robust, graph.tangent_dim, gnc_options)
-                    for name, kept in (("guess", decision), ("chordal", other))
-                }
-                if costs["chordal"] < costs["guess"]:
-                    decision, other, start = other, decision, "chordal"
+                if other.truncated_cost < decision.truncated_cost:
                     message_note = (
-                        f"; decision from the chordal initialization (truncated cost {costs['chordal']:.6g}, against"
-                        f" {costs['guess']:.6g} from the initial guess)"
+                        f"; decision from the chordal initialization (truncated cost {other.truncated_cost:.6g},"
+                        f" against {decision.truncated_cost:.6g} from the initial guess)"
                     )
+                    decision, other, start = other, decision, "chordal"
                 disputed = robust & ~decision.inliers & other.inliers
         poses, inliers, settled = decision.poses, decision.inliers, decision.settled
         if decision.reports:
@@ -339,13 +335,6 @@ def solve(
     )
 
 
-def _truncated_cost(
-    factors: BetweenFactors, poses: np.ndarray, robust: np.ndarray, d: int, options: GncOptions
-) -> float:
-    """`egnc.decision.truncated_cost` at `(N, n, n)` poses."""
-    return truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, options.outlier_quantile)
-
-
 def _nothing_to_optimize(
     graph: PoseGraph,
     method: str,
@@ -358,7 +347,7 @@ def _nothing_to_optimize(
 ) -> Result:
     """The `Result` of a graph whose poses are all fixed: the graph unchanged, no stage run, a warning."""
     r = factors.whitened_norms(factors.residuals(to_matrices(graph.dim, graph.poses)))
-    cost = float(0.5 * np.sum(r**2))
+    inliers = np.ones(graph.num_edges, dtype=bool)
     return Result(
         graph=graph,
         method=method,
@@ -367,11 +356,8 @@ def _nothing_to_optimize(
         weights=np.ones(graph.num_edges),
         mu=np.full(graph.num_edges, np.nan),
         known_inliers=known,
-        inliers=np.ones(graph.num_edges, dtype=bool),
-        initial_cost=cost,
-        cost=cost,
-        accepted_cost=cost,
-        truncated_cost=truncated_cost(r, ~known, graph.tangent_dim, gnc_options.outlier_quantile),
+        inliers=inliers,
+        **result_costs(r, r, inliers, ~known, graph.tangent_dim, gnc_options.outlier_quantile),
         iterations=0,
         stages=(),
         status=NOTHING_TO_OPTIMIZE,

@@ -47,7 +47,7 @@ import numpy as np
 
 from egnc.connectivity import connected_components
 from egnc.factors import BetweenFactors
-from egnc.gnc import GncOptions, StageCallback, StageReport, classify_inliers
+from egnc.gnc import GncOptions, StageCallback, StageReport, StageStart, classify_inliers
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
 from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
@@ -176,12 +176,14 @@ class Decision:
         reports: one `StageReport` per round.
         settled: whether the last round left the classification unchanged (false when the
             rounds ran out, a round hit its iteration limit, or no round could run).
+        truncated_cost: `truncated_cost` at `poses`, by which two decisions are compared.
     """
 
     poses: np.ndarray
     inliers: np.ndarray
     reports: tuple[StageReport, ...]
     settled: bool
+    truncated_cost: float
 
 
 def truncated_cost(r: np.ndarray, robust: np.ndarray, d: int, quantile: float) -> float:
@@ -212,6 +214,7 @@ def decide_outliers(
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
     inliers: np.ndarray | None = None,
+    start: StageStart = "guess",
 ) -> Decision:
     """Refine on the accepted edges and re-decide until the classification holds.
 
@@ -225,14 +228,16 @@ def decide_outliers(
         factors: the graph's factors, built once per solve.
         on_stage, on_iteration: progress callbacks; each round is reported as a stage.
         inliers: `(E,)` bool, the first classification; None classifies at `poses`.
+        start: the start the rounds belong to, stamped on their reports (`StageReport.start`).
 
     Returns:
         The `Decision`. No round runs when the accepted edges would split the graph into more
         pieces than all edges do.
     """
     d = graph.tangent_dim
+    r = factors.whitened_norms(factors.residuals(poses))
     if inliers is None:
-        inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
+        inliers = classify_inliers(r, robust, d, gnc_options)
     reports: list[StageReport] = []
     settled = False
     components = connected_components(graph.num_poses, graph.edges)[0]  # isolated vertices count too
@@ -260,6 +265,7 @@ def decide_outliers(
                 int(inliers.sum()),
                 refined.linear.cg_iterations,
                 kind="decision",
+                start=start,
             )
         )
         if on_stage is not None:
@@ -268,4 +274,10 @@ def decide_outliers(
             settled = refined.status not in (0, NUMERICAL_FAILURE)
             break
         inliers = decided
-    return Decision(poses=poses, inliers=inliers, reports=tuple(reports), settled=settled)
+    return Decision(
+        poses=poses,
+        inliers=inliers,
+        reports=tuple(reports),
+        settled=settled,
+        truncated_cost=truncated_cost(r, robust, d, gnc_options.outlier_quantile),
+    )

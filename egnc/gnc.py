@@ -124,6 +124,7 @@ class GncOptions:
 
 
 StageKind = Literal["gnc", "decision", "probe"]
+StageStart = Literal["guess", "chordal"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,7 +157,7 @@ class StageReport:
     active_edges: int
     cg_iterations: int = 0
     kind: StageKind = "gnc"
-    start: Literal["guess", "chordal"] = "guess"
+    start: StageStart = "guess"
 
 
 StageCallback = Callable[[StageReport], None]

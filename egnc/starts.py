@@ -87,20 +87,17 @@ def chordal_decision(
         the rounds).
     """
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
-
-    def cost(poses: np.ndarray) -> float:
-        return truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, q)
-
     try:
         chordal = chordal_initialization(graph.subgraph_edges(trusted), linear_solver=linear_solver)
         poses = to_matrices(graph.dim, chordal)
     except SolverError:  # a chordal system the backend cannot factorize: no second start
         return None, ()
-    inliers = classify_inliers(factors.whitened_norms(factors.residuals(poses)), robust, d, gnc_options)
-    if np.array_equal(inliers, to_beat.inliers):
-        return None, ()
-    target = cost(to_beat.poses)
-    if cost(poses) > PROBE_GATE * target:
+    r = factors.whitened_norms(factors.residuals(poses))
+    inliers = classify_inliers(r, robust, d, gnc_options)
+    if (
+        np.array_equal(inliers, to_beat.inliers)
+        or truncated_cost(r, robust, d, q) > PROBE_GATE * to_beat.truncated_cost
+    ):
         return None, ()
     problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver, factors.subset(inliers))
     probe_options = replace(solver_options, max_iterations=PROBE_ITERATIONS)
@@ -120,14 +117,20 @@ def chordal_decision(
     )
     if on_stage is not None:
         on_stage(report)
-    if cost(probe.poses) >= target:
+    probe_r = factors.whitened_norms(factors.residuals(probe.poses))
+    if truncated_cost(probe_r, robust, d, q) >= to_beat.truncated_cost:
         return None, (report,)
-
-    def relay(round_report: StageReport) -> None:
-        if on_stage is not None:
-            on_stage(replace(round_report, start="chordal"))
-
     decision = decide_outliers(
-        graph, probe.poses, robust, solver_options, gnc_options, linear_solver, factors, relay, on_iteration, inliers
+        graph,
+        probe.poses,
+        robust,
+        solver_options,
+        gnc_options,
+        linear_solver,
+        factors,
+        on_stage,
+        on_iteration,
+        inliers,
+        start="chordal",
     )
-    return decision, (report, *(replace(round_report, start="chordal") for round_report in decision.reports))
+    return decision, (report, *decision.reports)
