@@ -21,7 +21,7 @@ from egnc.gnc import (
     StageCallback,
     StageReport,
     classify_inliers,
-    kept_stages,
+    iteration_limited,
     known_inlier_mask,
     run_gnc,
 )
@@ -127,7 +127,7 @@ class Result:
     @property
     def converged(self) -> bool:
         """Whether the last solve and every stage of the kept start stopped on a convergence criterion."""
-        return self.status in (1, 2, 3) and all(stage.status != 0 for stage in kept_stages(self.stages, self.start))
+        return self.status in (1, 2, 3) and not iteration_limited(self.stages, self.start)
 
     @property
     def rejected_edges(self) -> np.ndarray:
@@ -271,7 +271,7 @@ def solve(
     robust_r = factors.whitened_norms(factors.residuals(poses))
     decide = refine and status != NUMERICAL_FAILURE  # nothing to decide on a failed solve
     start, settled, message_note = "guess", True, ""
-    disputed = np.zeros(graph.num_edges, dtype=bool)
+    disputed: np.ndarray | None = None
     if decide:
         decision = decide_outliers(graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration)
         stages += decision.reports

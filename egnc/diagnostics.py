@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from egnc.gnc import StageReport, kept_stages
+from egnc.gnc import StageReport, iteration_limited
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
 from egnc.metrics import ate
@@ -48,18 +48,16 @@ def solve_warnings(
         initial_r, final_r: `(E,)` whitened residual norms at the initial guess and the result.
         initial_fits: `(E,)` bool, edges that pass the outlier test at the initial guess.
         result_poses: `(N, P)` optimized poses in the graph's parametrization.
-        start: the start whose decision was kept (`egnc.gnc.kept_stages`: only its stages count).
+        start: the start whose decision was kept (only its stages count: `egnc.gnc.iteration_limited`).
         settled: whether the outlier decision reached a classification its own map confirms
             (`egnc.decision.Decision.settled`).
         disputed: `(E,)` bool, loops the kept decision rejects and the other start's decision
             accepted (`egnc.starts`); None when only one start decided.
     """
-    kept = kept_stages(tuple(stages), start)
     warnings = [
-        f"stage {k} stopped at its iteration limit ({stage.iterations} iterations): the result may not"
+        f"stage {k} stopped at its iteration limit ({stages[k - 1].iterations} iterations): the result may not"
         " have converged (raise --max-iters)"
-        for k, stage in enumerate(stages, start=1)
-        if stage.status == 0 and stage in kept
+        for k in iteration_limited(stages, start)
     ]
     if not settled:
         warnings.append(

@@ -18,7 +18,7 @@ References:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -164,9 +164,13 @@ StageCallback = Callable[[StageReport], None]
 """Receives each stage's report as soon as the stage ends."""
 
 
-def kept_stages(stages: tuple[StageReport, ...], start: str) -> tuple[StageReport, ...]:
-    """The stages that shaped a result kept from `start`: that start's, without the probe (which stops by design)."""
-    return tuple(stage for stage in stages if stage.start == start and stage.kind != "probe")
+def iteration_limited(stages: Sequence[StageReport], start: str) -> list[int]:
+    """1-based numbers of the stages of `start` at their iteration limit (the probe stops there by design)."""
+    return [
+        k
+        for k, stage in enumerate(stages, start=1)
+        if stage.status == 0 and stage.start == start and stage.kind != "probe"
+    ]
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,13 +10,7 @@ import numpy as np
 
 from egnc.api import Result
 from egnc.connectivity import describe_ids
-from egnc.gnc import kept_stages
-
-
-def iteration_limited_stages(result: Result) -> list[int]:
-    """1-based numbers of the kept start's stages that stopped at their iteration limit (status 0)."""
-    kept = kept_stages(result.stages, result.start)
-    return [k for k, stage in enumerate(result.stages, start=1) if stage.status == 0 and stage in kept]
+from egnc.gnc import iteration_limited
 
 
 def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:
@@ -105,7 +99,7 @@ def _nulls_for_non_finite(value: Any, where: str, notes: list[str]) -> Any:
 def summary(result: Result, written: list[Path]) -> str:
     """A short human-readable summary of a solve: size, method, cost, termination, rejections, files."""
     graph = result.graph
-    limited = iteration_limited_stages(result)
+    limited = iteration_limited(result.stages, result.start)
     if len(limited) == 1:
         stopped = f"iteration limit reached in stage {limited[0]}"
     elif limited:
