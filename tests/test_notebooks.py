@@ -26,6 +26,7 @@ NAMES = (
     "03_convexity_region.ipynb",
     "04_false_loops.ipynb",
     "05_your_data.ipynb",
+    "06_online.ipynb",
 )
 TIMEOUT_S = 120
 """Budget of one notebook, start to end (each is meant to take well under a minute)."""
@@ -120,6 +121,16 @@ def test_line_fitting_prints_its_answer(run_notebook):
     egnc_a, egnc_stages, risam_a, risam_stages = float(answer[1]), int(answer[2]), float(answer[3]), int(answer[4])
     assert abs(egnc_a - 1.0) < 0.1 and abs(risam_a - 1.0) < 0.1
     assert egnc_stages < risam_stages == 5
+
+
+def test_online_notebook_prints_its_answer(run_notebook):
+    """The online notebook ends with its iteration totals; EGNC's schedule spends fewer than riSAM's."""
+    notebook, _ = run_notebook("06_online.ipynb")
+    text = "".join(output.get("text", "") for output in code_outputs(notebook))
+    answer = re.search(r"^EGNC: (\d+) iterations; riSAM: (\d+) iterations; ratio [\d.]+$", text, re.MULTILINE)
+    assert answer, text
+    assert 0 < int(answer[1]) < int(answer[2])
+    assert "egnc.replay makes the same updates and the same final decisions as the loop above" in text
 
 
 def test_readme_snippet_prints_the_line_it_shows():
