@@ -134,6 +134,7 @@ class StepSolver:
         weights: np.ndarray,
         method: LinearMethod = "auto",
         trust_weight: float = 1e-4,
+        trusted: np.ndarray | None = None,
     ) -> None:
         """Take the undamped `H` of one linearization.
 
@@ -141,12 +142,15 @@ class StepSolver:
             data: `(nnz,)` CSC data of `H` in `pattern`.
             products: `(E, 2d, 2d + 1)` per-edge products `H` was summed from (`edge_products`).
             weights: `(E,)` IRLS weights.
-            method: `"auto"` (CG preconditioned by the trusted edges when some edge is below
-                `trust_weight`) or `"direct"`.
-            trust_weight: weight from which an edge is in the preconditioner.
+            method: `"auto"` (CG preconditioned by the trusted edges when some edge is not
+                trusted) or `"direct"`.
+            trust_weight: weight from which an edge is trusted (in the preconditioner).
+            trusted: `(E,)` bool, the trusted edges, instead of `weights >= trust_weight`: a
+                caller that keeps one set over many linearizations pays one analysis for it.
         """
         self._data = data
-        trusted = weights >= trust_weight
+        if trusted is None:
+            trusted = weights >= trust_weight
         self._trusted = None
         if method == "auto" and not trusted.all():
             self._trusted = self._trusted_system(trusted)
