@@ -23,6 +23,15 @@ So the decision is made on least-squares maps instead, in rounds:
 4. Repeat until the classification holds (or `MAX_ROUNDS`, or a round that reaches the
    iteration limit).
 
+Hysteresis: a loop re-admitted in step 3 is rejected in step 2 of a later round only when its
+`r^2` exceeds `chi2.ppf(q_readmit, d)`, the quantile of the test that admitted it. For a linear
+model a loop's residual in a map that includes it is no larger (in `r^2`) than its innovation
+statistic against the map without it, so the two tests then agree; held to `q` instead, a true
+loop between the two quantiles was rejected on one map and re-admitted on the next, and the
+rounds alternated until `MAX_ROUNDS` (grids of 2000 to 100 000 poses). Should a classification
+still come back, the rounds stop there and keep the one of lowest truncated cost
+(`truncated_cost`) among those of the cycle, with its least-squares map.
+
 Under the linear-Gaussian model the false-alarm rate per honest loop is below `1 - q` for the
 test of step 2 (an included loop's `r^2` is stochastically smaller than chi-square: it pulls the
 map towards itself) and `1 - q_readmit` for step 3.
@@ -41,7 +50,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -241,6 +250,10 @@ def decide_outliers(
     reports: list[StageReport] = []
     settled = False
     components = connected_components(graph.num_poses, graph.edges)[0]  # isolated vertices count too
+    strict = replace(gnc_options, outlier_quantile=gnc_options.readmit_quantile)
+    ever_readmitted = np.zeros(graph.num_edges, dtype=bool)
+    solved: dict[bytes, int] = {}  # classification -> its round in `rounds`
+    rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []  # inliers, poses, r, truncated cost
     for _ in range(MAX_ROUNDS):
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
             break
@@ -249,9 +262,15 @@ def decide_outliers(
         refined = solve_least_squares(problem, poses, None, solver_options, on_iteration)
         poses = refined.poses
         r = factors.whitened_norms(factors.residuals(poses))
+        solved[np.packbits(inliers).tobytes()] = len(rounds)
+        rounds.append((inliers, poses, r, truncated_cost(r, robust, d, gnc_options.outlier_quantile)))
         decided = classify_inliers(r, robust, d, gnc_options)
         if gnc_options.readmit:
+            # A loop the innovation test admitted is held to that test's quantile from then on
+            # (module docstring, "Hysteresis").
+            decided |= ever_readmitted & classify_inliers(r, robust, d, strict)
             back = readmitted(problem, poses, factors, ~inliers, r, gnc_options.readmit_quantile)
+            ever_readmitted |= back
             decided = (decided & inliers) | back
         reports.append(
             StageReport(
@@ -272,6 +291,11 @@ def decide_outliers(
             on_stage(reports[-1])
         if np.array_equal(decided, inliers) or refined.status in (0, NUMERICAL_FAILURE):  # settled, or stuck
             settled = refined.status not in (0, NUMERICAL_FAILURE)
+            break
+        first = solved.get(np.packbits(decided).tobytes())
+        if first is not None:  # a cycle: keep its classification of lowest truncated cost
+            inliers, poses, r, _ = min(rounds[first:], key=lambda solved_round: solved_round[3])
+            settled = True
             break
         inliers = decided
     return Decision(

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 import egnc
+import egnc.decision as decision_module
 from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import MAX_ROUNDS, sequentially_consistent
+from egnc.decision import MAX_ROUNDS, decide_outliers, sequentially_consistent, truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions
 from egnc.io import read_irl
@@ -208,3 +209,47 @@ def test_vertices_without_edges_do_not_switch_the_decision_off(tmp_path):
     result = solve(graph)
     assert np.isnan(result.stages[-1].mu_min)  # the decision rounds ran
     np.testing.assert_array_equal(~result.inliers, is_outlier)
+
+
+def test_decision_rounds_reach_a_fixed_point_where_they_used_to_alternate():
+    # A 2000-pose grid whose rounds from the guess alternated between two classifications until
+    # the round limit: true loops rejected at chi2.ppf(0.99) on one map came back through the
+    # innovation test on the next. Held to the readmission quantile, they stay.
+    graph = grid_world(2, 2000, seed=2).graph
+    clean = solve(graph, "l2")
+    corrupted = add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
+    result = solve(corrupted.graph, gnc_options=GncOptions(chordal_start=False))
+    rounds = [stage for stage in result.stages if stage.kind == "decision"]
+    assert len(rounds) < MAX_ROUNDS
+    assert result.warnings == ()
+    np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
+
+
+def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch):
+    # Force a cycle: every rejected loop is re-admitted, and the false ones fail again on the
+    # next map. The rounds stop at the repeat and keep the classification of lowest truncated
+    # cost in the cycle, with its least-squares map.
+    world = grid_world(2, 300, seed=3, noise_scale=0.3)
+    clean = solve(world.graph, "l2")
+    corrupted = add_false_loops(world.graph, 20, seed=4, reference_poses=clean.graph.poses)
+    graph, robust = corrupted.graph, corrupted.graph.is_loop_closure
+    solved = []  # (classification, truncated cost at its least-squares map) of every round
+
+    def readmit_all(problem, poses, factors, rejected, r, quantile):
+        solved.append((~rejected, truncated_cost(r, robust, 3, 0.99)))
+        return rejected
+
+    monkeypatch.setattr(decision_module, "readmitted", readmit_all)
+    factors = BetweenFactors.from_graph(graph)
+    inliers = ~corrupted.is_outlier
+    decision = decide_outliers(
+        graph, to_matrices(2, graph.poses), robust, SolverOptions(), GncOptions(), "auto", factors, inliers=inliers
+    )
+    assert len(decision.reports) == len(solved) < MAX_ROUNDS  # stopped at the repeat, not at the limit
+    assert np.array_equal(solved[0][0], inliers) and not np.array_equal(solved[1][0], inliers)
+    # a classification the rounds solved, no costlier than the last one (which is in the cycle)
+    best, cost = next(pair for pair in solved if np.array_equal(pair[0], decision.inliers))
+    assert decision.truncated_cost == cost <= solved[-1][1]
+    assert cost < max(pair[1] for pair in solved[1:])  # the cycle did offer a choice
+    refit = solve(graph.subgraph_edges(best), "l2", known_inliers="none")
+    np.testing.assert_allclose(decision.poses, to_matrices(2, refit.graph.poses), atol=1e-6)
