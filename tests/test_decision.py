@@ -11,6 +11,7 @@ import pytest
 
 import egnc
 import egnc.decision as decision_module
+import egnc.marginals as marginals_module
 from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import MAX_ROUNDS, decide_outliers, sequentially_consistent, truncated_cost
@@ -253,3 +254,20 @@ def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch
     assert cost < max(pair[1] for pair in solved[1:])  # the cycle did offer a choice
     refit = solve(graph.subgraph_edges(best), "l2", known_inliers="none")
     np.testing.assert_allclose(decision.poses, to_matrices(2, refit.graph.poses), atol=1e-6)
+
+
+def test_covariances_solved_in_column_groups_equal_one_solve(monkeypatch):
+    # The right-hand sides are solved a few columns at a time to bound memory on large maps.
+    world = grid_world(2, 200, seed=8, noise_scale=0.5)
+    graph = world.graph
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[np.flatnonzero(graph.is_loop_closure)[:5]] = True
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out))
+    poses = to_matrices(2, solve(graph.subgraph_edges(~left_out), "l2").graph.poses)
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    rows = np.arange(0, 200, 7)
+    whole = innovations(problem, poses, loops), pose_covariances(problem, poses, rows)
+    monkeypatch.setattr(marginals_module, "_MAX_RHS_VALUES", 2 * problem.pattern.size * 3)  # 2 blocks of 3
+    grouped = innovations(problem, poses, loops), pose_covariances(problem, poses, rows)
+    for a, b in zip((*whole[0], whole[1]), (*grouped[0], grouped[1]), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
