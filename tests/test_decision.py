@@ -271,3 +271,31 @@ def test_covariances_solved_in_column_groups_equal_one_solve(monkeypatch):
     grouped = innovations(problem, poses, loops), pose_covariances(problem, poses, rows)
     for a, b in zip((*whole[0], whole[1]), (*grouped[0], grouped[1]), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+
+
+def test_the_bounds_that_spare_covariance_solves_hold():
+    # Readmission skips the covariance of a loop with r^2 below the threshold (its innovation
+    # statistic is at most r^2) and of a batch whose statistics all exceed a floor that holds
+    # for well-determined loops. Both bounds, on loops left out of a map, true and false.
+    world = grid_world(2, 300, seed=11, noise_scale=0.5)
+    clean = solve(world.graph, "l2")
+    corrupted = add_false_loops(world.graph, 20, seed=12, reference_poses=clean.graph.poses)
+    graph = corrupted.graph
+    left_out = corrupted.is_outlier.copy()
+    left_out[np.flatnonzero(graph.is_loop_closure & ~corrupted.is_outlier)[::10]] = True
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out))
+    poses = to_matrices(2, solve(graph.subgraph_edges(~left_out), "l2").graph.poses)
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    e, S = innovations(problem, poses, loops)
+    d = 3
+    blocks = np.arange(len(e))[:, None] * d + np.arange(d)
+    S_kk = S[blocks[:, :, None], blocks[:, None, :]]
+    alone = np.einsum("ki,ki->k", e, np.linalg.solve(S_kk, e[:, :, None])[:, :, 0])
+    r = loops.whitened_norms(e)
+    assert np.all(alone <= r * r * (1 + 1e-12))
+    own = np.linalg.inv(loops.information)
+    well_determined = np.trace(S_kk - own, axis1=1, axis2=2) <= np.trace(own, axis1=1, axis2=2)
+    floor = decision_module._statistic_floor(loops, poses)
+    assert well_determined.sum() > 10
+    assert np.all(floor[well_determined] <= alone[well_determined] * (1 + 1e-12))
+    assert np.any(floor > chi2_quantile(0.9999, d))  # the floor does spare false loops
