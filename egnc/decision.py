@@ -41,7 +41,8 @@ statistic is never larger than `r^2`, since its covariance is the loop's own plu
 loops that the robust optimum let go are mostly of this kind: 363 of a 25 000-pose grid's first
 round, which took seven batches of covariance solves). The others are tested in order of
 increasing `r^2`, in batches of `READMIT_BATCH`; testing stops at the first batch in which none passes
-(the all-agree test starts from the largest residuals and stops at the first batch that fails),
+(the all-agree test starts from the largest residuals and stops at the first batch that fails, or
+before it when its largest loop alone rules it out, `_all_agree`),
 and before solving a batch of which a bound that needs no covariance says none can pass
 (`_statistic_floor`). So a graph with thousands of gross false loops pays for one or two
 batches of marginal covariances per round, not thousands.
@@ -106,13 +107,7 @@ def readmitted(
         return passed
     try:
         covariance_solve = covariance_solver(problem, poses)
-        # Largest residuals first: one batch refutes "all fit" in a graph with gross outliers.
-        for stop in range(len(candidates), 0, -READMIT_BATCH):
-            batch = candidates[max(0, stop - READMIT_BATCH) : stop]
-            e, S, _ = _batch_innovations(problem, poses, factors, batch, covariance_solve)
-            if not sequentially_consistent(e, S, threshold).all():
-                break
-        else:
+        if _all_agree(problem, poses, factors, candidates, covariance_solve, threshold):
             return rejected.copy()
         floor = _statistic_floor(factors.subset(np.sort(candidates)), poses)
         floor = floor[np.searchsorted(np.sort(candidates), candidates)]  # in candidate order
@@ -130,6 +125,32 @@ def readmitted(
     except NotPositiveDefiniteError:  # no covariance at a degenerate solution: nothing to test against
         pass
     return passed
+
+
+def _all_agree(
+    problem: Problem,
+    poses: np.ndarray,
+    factors: BetweenFactors,
+    candidates: np.ndarray,
+    covariance_solve: Callable[[np.ndarray], np.ndarray],
+    threshold: float,
+) -> bool:
+    """Whether every loop of `candidates` `(K,)` (by increasing `r`) passes, batch by batch.
+
+    Largest residuals first: one batch refutes "all agree" in a graph with gross outliers, and
+    most often its largest loop alone does, for `d` columns instead of a batch's: every loop of a
+    batch passes only if the batch's joint statistic is at most `len(batch) * threshold`, and a
+    joint statistic is at least that of any one of its loops.
+    """
+    e, S, _ = _batch_innovations(problem, poses, factors, candidates[-1:], covariance_solve)
+    if float(e[0] @ np.linalg.solve(S, e[0])) > min(READMIT_BATCH, len(candidates)) * threshold:
+        return False
+    for stop in range(len(candidates), 0, -READMIT_BATCH):
+        batch = candidates[max(0, stop - READMIT_BATCH) : stop]
+        e, S, _ = _batch_innovations(problem, poses, factors, batch, covariance_solve)
+        if not sequentially_consistent(e, S, threshold).all():
+            return False
+    return True
 
 
 def _statistic_floor(loops: BetweenFactors, poses: np.ndarray) -> np.ndarray:
