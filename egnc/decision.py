@@ -234,8 +234,9 @@ class Decision:
             round ran).
         inliers: `(E,)` bool, the accepted edges.
         reports: one `StageReport` per round.
-        settled: whether the last round left the classification unchanged (false when the
-            rounds ran out, a round hit its iteration limit, or no round could run).
+        settled: whether the last round left the classification unchanged, or the rounds came
+            back to a classification they had solved and kept the cycle's lowest truncated cost
+            (false when the rounds ran out, a round hit its iteration limit, or no round could run).
         truncated_cost: `truncated_cost` at `poses`, by which two decisions are compared.
     """
 
