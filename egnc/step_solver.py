@@ -174,6 +174,14 @@ class StepSolver:
         self._trusted: _TrustedSystem | None = None
         self._trusted_data = np.empty(0)
 
+    def start_solve(self) -> None:
+        """Begin a nonlinear solve: reset the statistics and forget the trusted patterns, so that
+        which superset preconditions a step, and so its rounding, does not depend on what earlier
+        solves of the same problem analysed (a solve's steps are then the same bit for bit
+        whether or not earlier GNC stages were solved)."""
+        self.statistics = LinearStatistics()
+        self._trusted_systems.clear()
+
     def set_system(
         self,
         data: np.ndarray,
