@@ -277,7 +277,7 @@ def solve_least_squares(
         return errors, r, float(np.sum(loss.cost(r)))
 
     steps = problem.step_solver
-    steps.statistics = LinearStatistics()
+    steps.start_solve()
     with clock("linearize"):
         errors, r, cost = evaluate(T)
     history = [cost]
