@@ -169,6 +169,7 @@ class StepSolver:
         self.pattern, self.direct_solver = pattern, direct_solver
         self._components = 0  # of the whole graph, counted when a trusted set first needs it
         self._trusted_systems: OrderedDict[bytes, _TrustedSystem] = OrderedDict()
+        self._given_systems: OrderedDict[bytes, _TrustedSystem | None] = OrderedDict()  # exact sets, kept
         self.analyses = 0  # trusted patterns analysed
         self.statistics = LinearStatistics()
         self._data = np.empty(0)
@@ -201,17 +202,20 @@ class StepSolver:
             method: `"auto"` (CG preconditioned by the trusted edges when some edge is not
                 trusted) or `"direct"`.
             trust_weight: weight from which an edge is trusted (in the preconditioner).
-            trusted: `(E,)` bool, the trusted edges, instead of `weights >= trust_weight`: a
-                caller that keeps one set over many linearizations pays one analysis for it.
+            trusted: `(E,)` bool, the preconditioner's edges exactly, instead of those chosen by
+                `trust_weight`: a caller that keeps one set over many linearizations and solves
+                pays one analysis for it (its analysis outlives `start_solve`).
         """
         self._data = data
-        if trusted is None:
-            trusted = weights >= trust_weight
         self._trusted = None
-        if method == "auto" and not trusted.all():
-            self._trusted = self._trusted_system(trusted, weights >= PATTERN_MARGIN * trust_weight)
-            if self._trusted is not None:
-                self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
+        if method == "auto" and trusted is not None:
+            self._trusted = None if trusted.all() else self._given_system(trusted)
+        elif method == "auto":
+            by_weight = weights >= trust_weight
+            if not by_weight.all():
+                self._trusted = self._trusted_system(by_weight, weights >= PATTERN_MARGIN * trust_weight)
+        if self._trusted is not None:
+            self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
 
     def solve(
         self, shift: np.ndarray, rhs: np.ndarray, cg_tol: float = 1e-10, max_cg_iterations: int = 200
@@ -303,7 +307,26 @@ class StepSolver:
             if not np.any(trusted & ~system.edges):
                 self._trusted_systems.move_to_end(key)
                 return system
-        edges = self._edges[margin]
+        analysed = self._analysed_system(margin)
+        if analysed is not None:
+            self._trusted_systems[np.packbits(margin).tobytes()] = analysed
+            if len(self._trusted_systems) > _CACHED_TRUSTED_SETS:
+                self._trusted_systems.popitem(last=False)
+        return analysed
+
+    def _given_system(self, trusted: np.ndarray) -> _TrustedSystem | None:
+        """The analysis of exactly the `trusted` `(E,)` edges, cached across solves; None as above."""
+        key = np.packbits(trusted).tobytes()
+        if key not in self._given_systems:
+            self._given_systems[key] = self._analysed_system(trusted)
+            if len(self._given_systems) > _CACHED_TRUSTED_SETS:
+                self._given_systems.popitem(last=False)
+        self._given_systems.move_to_end(key)
+        return self._given_systems[key]
+
+    def _analysed_system(self, selected: np.ndarray) -> _TrustedSystem | None:
+        """Pattern and analysis of the `selected` `(E,)` edges; None when they leave a pose unconstrained."""
+        edges = self._edges[selected]
         if not self._components:
             self._components = connected_components(len(self._fixed), self._edges)[0]
         if connected_components(len(self._fixed), edges)[0] != self._components:
@@ -317,8 +340,4 @@ class StepSolver:
         unknowns[(pattern.free_index[free][:, None] * self._d + component).ravel()] = (
             self.pattern.free_index[free][:, None] * self._d + component
         ).ravel()
-        system = _TrustedSystem(margin.copy(), pattern, solver, unknowns)
-        self._trusted_systems[np.packbits(margin).tobytes()] = system
-        if len(self._trusted_systems) > _CACHED_TRUSTED_SETS:
-            self._trusted_systems.popitem(last=False)
-        return system
+        return _TrustedSystem(selected.copy(), pattern, solver, unknowns)
