@@ -18,7 +18,9 @@ Columns:
 - `updates`: updates (one per new pose); `loop updates`: those that added a loop closure.
 - `iterations`: accepted solver steps summed over all updates (the final decision excluded).
 - `total s`: sum of the update times (reading, reference, final decision excluded);
-  `decide s`: the final decision.
+  `decide s`: the final decision (`result()`: from the online estimate and from the batch solve);
+  `kept`: the start whose decision `result()` kept (`online`, or the batch solve's `guess` /
+  `chordal`).
 - `p50`, `p99`, `max`: update latency in milliseconds over all updates; `loop p50`: over the
   updates that added a loop closure.
 - `ratio`: egnc's total time and iterations over risam's on the same replay.
@@ -76,6 +78,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         "iterations": int(iterations.sum()),
         "total_s": float(outcome.total_s),
         "decide_s": decide_s,
+        "kept": outcome.result.start,
         **latency,
         "loop_p50": float(np.percentile(ms[has_loop], 50)) if has_loop.any() else 0.0,
     }
@@ -104,7 +107,7 @@ def cases(args: argparse.Namespace):
 
 HEADER = (
     "| dataset | % | method | P | R | P now | R now | ATE (m) | updates | loop updates | iterations | total s"
-    " | decide s | p50 ms | p99 ms | max ms | loop p50 ms | ratio time / iterations |"
+    " | decide s | kept | p50 ms | p99 ms | max ms | loop p50 ms | ratio time / iterations |"
 )
 
 
@@ -142,7 +145,7 @@ def main() -> int:
             print(
                 f"| {name} | {percent:.0f} | {row['method']} | {row['P']:.4f} | {row['R']:.4f} | {row['P_now']:.4f}"
                 f" | {row['R_now']:.4f} | {row['ate']:.4f} | {row['updates']} | {row['loop_updates']}"
-                f" | {row['iterations']} | {row['total_s']:.1f} | {row['decide_s']:.2f} | {row['p50']:.1f}"
+                f" | {row['iterations']} | {row['total_s']:.1f} | {row['decide_s']:.2f} | {row['kept']} | {row['p50']:.1f}"
                 f" | {row['p99']:.1f} | {row['max']:.1f} | {row['loop_p50']:.1f} | {ratio} |",
                 flush=True,
             )

@@ -2,14 +2,18 @@
 
     python benchmarks/bench_robust_speed.py [--datasets manhattanOlson3500,sphere2500]
         [--percent 10,30,50] [--seeds 1] [--backends cholmod,scipy] [--direct] [--before]
-        [--large] [--importtime]
+        [--large] [--grid 100000,...] [--importtime]
 
-Each row runs in its own child process (its peak resident memory is the row's `peak MiB`):
-read the file, solve its least squares once untimed (the reference and a warm-up), then time
-the clean least-squares solve (`egnc.solve(graph, "l2")`) and the default robust solve
-(`egnc.solve(corrupted, "egnc")`) of the same file with riSAM-protocol false loops; the ratio of
-the two is measured in one process. Iterations are per solved stage (the last one is the
-least-squares refinement); `CG` is the conjugate-gradient iterations of all steps.
+Each row runs in two child processes, so that each solve's peak resident memory is its own: the
+first reads the file (or generates the grid), solves its least squares once untimed (the
+reference and a warm-up), then times the clean least-squares solve (`egnc.solve(graph, "l2")`):
+its peak is `clean MiB`. The second adds riSAM-protocol false loops drawn against that reference
+and times the default robust solve (`egnc.solve(corrupted, "egnc")`): its peak is `peak MiB`.
+Iterations are per solved stage (the last one is the least-squares refinement); `CG` is the
+conjugate-gradient iterations of all steps; `analyses` counts the linear solvers created for a
+new sparsity pattern (each a fill-reducing ordering and a symbolic analysis: GNC problem,
+trusted preconditioners, decision rounds, chordal solves); `rounds` the decision rounds of both
+starts.
 
 - `--direct`: also solve with `SolverOptions(linear_method="direct")` (one factorization of all
   edges per step) and report whether it rejects the same loops (`same as direct`).
@@ -18,6 +22,8 @@ least-squares refinement); `CG` is the conjugate-gradient iterations of all step
   whether it rejects the same loops.
 - `--large`: add city10000 at 30% and a generated 100k-pose 2D grid at 10% (seed 1);
   `--datasets "" --large` runs only those.
+- `--grid`: add generated 2D grids (`egnc.datasets.grid_world`, seed 1) of these pose counts, at
+  each `--percent`; `--datasets "" --grid 100000` runs only those.
 - `--importtime`: print the slowest imports of `python -X importtime -c "import egnc"`.
 
 Precision and recall count false loops as positives; ATE is against the clean optimum (m).
@@ -31,6 +37,7 @@ import os
 import platform
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -38,42 +45,74 @@ DATASETS = Path(os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents
 GRID_100K = "grid2d-100k"
 
 
-def run_case(case: dict) -> dict:
-    """Solve one case in this process and return its figures (the child's side)."""
+def _graph(case: dict):
+    """The case's clean graph: a shared file, or a generated 2D grid (`grid2d-<poses>`)."""
+    from egnc.datasets import grid_world
+    from egnc.io import read_g2o
+
+    if case["dataset"].startswith("grid2d-"):
+        poses = 100_000 if case["dataset"] == GRID_100K else int(case["dataset"].split("-")[1])
+        return grid_world(2, poses, seed=1).graph
+    return read_g2o(DATASETS / f"{case['dataset']}.g2o")
+
+
+def run_clean(case: dict) -> dict:
+    """Solve the clean least squares (the reference, then timed); save the reference poses (the child's side)."""
     import numpy as np
 
     from egnc.api import solve
-    from egnc.datasets import add_false_loops, grid_world
+
+    backend = case["backend"]
+    graph = _graph(case)
+    reference = solve(graph, "l2", linear_solver=backend)
+    np.save(case["reference"], reference.graph.poses)
+    started = time.perf_counter()
+    clean = solve(graph, "l2", linear_solver=backend)
+    return {"clean_s": time.perf_counter() - started, "clean_iterations": clean.iterations}
+
+
+def run_robust(case: dict) -> dict:
+    """Corrupt the graph against the saved reference and time the robust solve (the child's side)."""
+    import numpy as np
+
+    import egnc.chordal
+    import egnc.step_solver
+    from egnc.api import solve
+    from egnc.datasets import add_false_loops
     from egnc.gnc import GncOptions
-    from egnc.io import read_g2o
     from egnc.least_squares import SolverOptions
     from egnc.metrics import ate, precision_recall
 
+    analyses = [0]
+
+    def counted(make):  # every linear solver made for a new pattern is one symbolic analysis
+        def make_counted(*args, **kwargs):
+            analyses[0] += 1
+            return make(*args, **kwargs)
+
+        return make_counted
+
+    egnc.step_solver.make_linear_solver = counted(egnc.step_solver.make_linear_solver)
+    egnc.chordal.make_linear_solver = counted(egnc.chordal.make_linear_solver)
     backend = case["backend"]
-    if case["dataset"] == GRID_100K:
-        graph = grid_world(2, 100_000, seed=1).graph
-    else:
-        graph = read_g2o(DATASETS / f"{case['dataset']}.g2o")
-    reference = solve(graph, "l2", linear_solver=backend)
-    started = time.perf_counter()
-    clean = solve(graph, "l2", linear_solver=backend)
-    clean_s = time.perf_counter() - started
-    corrupted = add_false_loops(graph, case["percent"], seed=case["seed"], reference_poses=reference.graph.poses)
+    graph = _graph(case)
+    reference_poses = np.load(case["reference"])
+    corrupted = add_false_loops(graph, case["percent"], seed=case["seed"], reference_poses=reference_poses)
     started = time.perf_counter()
     robust = solve(corrupted.graph, "egnc", linear_solver=backend)
     robust_s = time.perf_counter() - started
     precision, recall = precision_recall(~robust.inliers, corrupted.is_outlier)
     out = {
-        "clean_s": clean_s,
-        "clean_iterations": clean.iterations,
         "robust_s": robust_s,
         "iterations": [stage.iterations for stage in robust.stages],
         "cg": sum(stage.cg_iterations for stage in robust.stages),
+        "analyses": analyses[0],
+        "rounds": sum(stage.kind == "decision" for stage in robust.stages),
         "false": int(corrupted.is_outlier.sum()),
         "rejected": int((~robust.inliers).sum()),
         "precision": precision,
         "recall": recall,
-        "ate": ate(robust.graph.poses[: graph.num_poses], reference.graph.poses, graph.dim),
+        "ate": ate(robust.graph.poses[: graph.num_poses], reference_poses, graph.dim),
     }
     direct = SolverOptions(linear_method="direct")
     variants = {"direct": (direct, GncOptions()), "before": (SolverOptions(), GncOptions(chordal_start=False))}
@@ -87,8 +126,8 @@ def run_case(case: dict) -> dict:
     return out
 
 
-def run_child(case: dict) -> dict:
-    """Run `case` in a child process; add its peak resident memory (MiB)."""
+def _child(case: dict) -> tuple[dict, float]:
+    """Run `case` in a child process; its figures and its peak resident memory (MiB)."""
     command = [sys.executable, __file__, "--case", json.dumps(case)]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
     assert process.stdout is not None
@@ -97,9 +136,16 @@ def run_child(case: dict) -> dict:
     process.returncode = os.waitstatus_to_exitcode(status)
     if process.returncode != 0:
         raise SystemExit(f"case {case} failed with exit code {process.returncode}")
-    figures = json.loads(output.strip().splitlines()[-1])
-    figures["peak_mib"] = usage.ru_maxrss / 1024  # kilobytes on Linux
-    return figures
+    return json.loads(output.strip().splitlines()[-1]), usage.ru_maxrss / 1024  # kilobytes on Linux
+
+
+def run_child(case: dict) -> dict:
+    """Run `case`'s clean and robust solves, each in its own child process, with their peak memory."""
+    with tempfile.TemporaryDirectory() as folder:
+        case = case | {"reference": str(Path(folder) / "reference.npy")}
+        clean, clean_mib = _child(case | {"phase": "clean"})
+        robust, robust_mib = _child(case | {"phase": "robust"})
+    return clean | robust | {"clean_mib": clean_mib, "peak_mib": robust_mib}
 
 
 def import_times(top: int = 12) -> list[tuple[int, int, str]]:
@@ -141,10 +187,12 @@ def main() -> None:
     parser.add_argument("--direct", action="store_true")
     parser.add_argument("--before", action="store_true")
     parser.add_argument("--large", action="store_true")
+    parser.add_argument("--grid", default="", help="generated 2D grids of these pose counts, at each --percent")
     parser.add_argument("--importtime", action="store_true")
     args = parser.parse_args()
     if args.case:
-        print(json.dumps(run_case(json.loads(args.case))))
+        case = json.loads(args.case)
+        print(json.dumps(run_clean(case) if case["phase"] == "clean" else run_robust(case)))
         return
 
     backends = args.backends.split(",")
@@ -158,30 +206,40 @@ def main() -> None:
     if args.large:
         cases += [{"dataset": "city10000", "percent": 30.0, "seed": 1, "backend": b} for b in backends]
         cases += [{"dataset": GRID_100K, "percent": 10.0, "seed": 1, "backend": b} for b in backends]
+    cases += [
+        {"dataset": f"grid2d-{poses}", "percent": float(percent), "seed": 1, "backend": backend}
+        for poses in filter(None, args.grid.split(","))
+        for percent in args.percent.split(",")
+        for backend in backends
+    ]
     print(f"{time.strftime('%Y-%m-%d')}; {versions()}\n")
     header = (
-        "| dataset | false % | seed | backend | clean l2 (s) | robust (s) | ratio | iterations | CG |"
-        " rejected / false | P | R | ATE (m) | peak MiB |"
+        "| dataset | false % | seed | backend | clean l2 (s) | robust (s) | ratio | iterations | CG | analyses |"
+        " rounds | rejected / false | P | R | ATE (m) | clean MiB | peak MiB | peak / clean |"
     )
     extra = (" direct (s) | same as direct |" if args.direct else "") + (
         " before (s) | same as before |" if args.before else ""
     )
     print(header + extra)
-    print("|---|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|" + "---:|---|" * extra.count("same"))
+    print(
+        "|---|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        + "---:|---|" * extra.count("same")
+    )
     for case in cases:
         f = run_child(case | {"direct": args.direct, "before": args.before})
         row = (
             f"| {case['dataset']} | {case['percent']:g} | {case['seed']} | {case['backend']} | {f['clean_s']:.3f}"
             f" | {f['robust_s']:.3f} | {f['robust_s'] / f['clean_s']:.1f} | {'+'.join(map(str, f['iterations']))}"
-            f" | {f['cg']} | {f['rejected']} / {f['false']} | {f['precision']:.4f} | {f['recall']:.4f}"
-            f" | {f['ate']:.2e} | {f['peak_mib']:.0f} |"
+            f" | {f['cg']} | {f['analyses']} | {f['rounds']} | {f['rejected']} / {f['false']} | {f['precision']:.4f}"
+            f" | {f['recall']:.4f} | {f['ate']:.2e} | {f['clean_mib']:.0f} | {f['peak_mib']:.0f}"
+            f" | {f['peak_mib'] / f['clean_mib']:.2f} |"
         )
         for name in ("direct", "before"):
             if f"{name}_s" in f:
                 row += f" {f[f'{name}_s']:.2f} | {'yes' if f[f'{name}_same'] else 'NO'} |"
         print(row, flush=True)
     if args.importtime:
-        print("\n`python -X importtime -c \"import egnc\"`, slowest (microseconds):\n")
+        print('\n`python -X importtime -c "import egnc"`, slowest (microseconds):\n')
         print("| module | self | cumulative |\n|---|---:|---:|")
         for own, cumulative, name in import_times():
             print(f"| {name} | {own} | {cumulative} |")

@@ -85,11 +85,13 @@ class Result:
             decision (the robust optimum; equal to `residual_norms` for single-stage methods).
             With `residual_norms` it explains a rejection: a loop far off at both is false.
         init: the initial guess used (`INITIALIZATIONS`).
-        start: where the decision that was kept started: `"guess"` (the GNC solve from `init`)
-            or `"chordal"` (the chordal initialization, kept for its lower truncated cost;
-            `GncOptions.chordal_start`).
+        start: where the decision that was kept started: `"guess"` (the GNC solve from `init`),
+            `"chordal"` (the chordal initialization, kept for its lower truncated cost;
+            `GncOptions.chordal_start`) or `"online"` (`egnc.online.OnlineSolver`'s estimate).
         warnings: one sentence per thing the user should check before trusting the result
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
+        settled: whether the kept decision's rounds reached a classification that no longer
+            changed (`egnc.decision.Decision.settled`); True where no decision was made.
     """
 
     graph: PoseGraph
@@ -114,6 +116,7 @@ class Result:
     warnings: tuple[str, ...] = ()
     init: str = "file"
     start: str = "guess"
+    settled: bool = True
 
     def __repr__(self) -> str:
         loops = int(np.count_nonzero(~self.known_inliers))
@@ -332,6 +335,7 @@ def solve(
         ),
         init=init,
         start=start,
+        settled=settled,
     )
 
 

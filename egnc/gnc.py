@@ -124,7 +124,7 @@ class GncOptions:
 
 
 StageKind = Literal["gnc", "decision", "probe"]
-StageStart = Literal["guess", "chordal"]
+StageStart = Literal["guess", "chordal", "online"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,8 +143,9 @@ class StageReport:
         kind: `"gnc"` (a graduated stage), `"decision"` (a least-squares round of
             `egnc.decision`) or `"probe"` (the few iterations `egnc.starts` gives the chordal
             start; it stops at its iteration limit by design).
-        start: the start the stage belongs to, `"guess"` or `"chordal"` (`egnc.starts`); only
-            the stages of the start that was kept (`Result.start`) shape the result.
+        start: the start the stage belongs to: `"guess"`, `"chordal"` (`egnc.starts`) or
+            `"online"` (the estimate of `egnc.online.OnlineSolver`); only the stages of the
+            start that was kept (`Result.start`) shape the result.
     """
 
     mu_min: float

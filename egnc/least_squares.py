@@ -248,6 +248,7 @@ def solve_least_squares(
     loss: EdgeLoss | None = None,
     options: SolverOptions = SolverOptions(),
     on_iteration: IterationCallback | None = None,
+    trusted: np.ndarray | None = None,
 ) -> SolverResult:
     """Minimize `sum rho(r_e)` over the free poses by GN or LM with IRLS weights.
 
@@ -257,6 +258,9 @@ def solve_least_squares(
         loss: per-edge cost and weight; `None` means plain least squares.
         options: solver options.
         on_iteration: called with `(iterations, cost)` after each accepted step.
+        trusted: `(E,)` bool, the edges of the CG preconditioner for every linearization of this
+            solve (`egnc.step_solver`); default: those whose weight is at least
+            `options.trust_weight` at each linearization.
 
     Returns:
         The `SolverResult`; it is returned (not raised) when the iteration limit is hit.
@@ -273,7 +277,7 @@ def solve_least_squares(
         return errors, r, float(np.sum(loss.cost(r)))
 
     steps = problem.step_solver
-    steps.statistics = LinearStatistics()
+    steps.start_solve()
     with clock("linearize"):
         errors, r, cost = evaluate(T)
     history = [cost]
@@ -289,7 +293,7 @@ def solve_least_squares(
                 weights = loss.weight(r)
                 products = edge_products(linearization, factors.information, weights)
                 data, gradient = pattern.scatter(products)
-                steps.set_system(data, products, weights, options.linear_method, options.trust_weight)
+                steps.set_system(data, products, weights, options.linear_method, options.trust_weight, trusted)
             diagonal = np.clip(data[pattern.diagonal_slots], 1e-6, 1e32)
         if not np.all(np.isfinite(data)) or not np.all(np.isfinite(gradient)):
             status = NUMERICAL_FAILURE

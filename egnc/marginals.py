@@ -12,7 +12,9 @@ loop would add. This is the re-admission test of `egnc.gnc`.
 
 Every query needs `A H^-1 A^T`, a `d x d` block: it is read off `H^-1 B` for a right-hand side `B`
 holding `A^T` in the rows of the two poses, solved for many queries at once with one
-factorization (a few thousand columns per call, to bound memory).
+factorization (in groups of columns, to bound memory). `B` has `2 d` nonzeros per column, so it
+is kept sparse and `B^T H^-1 B` is a sparse-dense product: as a dense product it cost twice the
+solve itself (a 192-column batch over 75 000 unknowns: 1.3 s against 0.7 s).
 
 References:
     M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data
@@ -21,9 +23,10 @@ References:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
+import scipy.sparse as sp
 
 from egnc.factors import BetweenFactors
 from egnc.least_squares import Problem
@@ -44,8 +47,8 @@ def covariance_solver(problem: Problem, poses: np.ndarray) -> Callable[[np.ndarr
     return problem.linear_solver.factorize(data)
 
 
-def _transposed_jacobians(problem: Problem, rows: np.ndarray, blocks: np.ndarray) -> np.ndarray:
-    """`(n, K d)` matrix `B` whose `k`-th group of `d` columns is `A_k^T`.
+def _transposed_jacobians(problem: Problem, rows: np.ndarray, blocks: np.ndarray) -> sp.csc_matrix:
+    """Sparse `(n, K d)` matrix `B` whose `k`-th group of `d` columns is `A_k^T`.
 
     Args:
         problem: gives the unknowns' layout.
@@ -55,15 +58,33 @@ def _transposed_jacobians(problem: Problem, rows: np.ndarray, blocks: np.ndarray
     """
     free_index = problem.pattern.free_index
     num_queries, d = len(rows), blocks.shape[-1]
-    B = np.zeros((problem.pattern.size, num_queries * d))
     columns = np.arange(num_queries)[:, None] * d + np.arange(d)  # (K, d)
+    row_parts, column_parts, value_parts = [], [], []
     for side in range(rows.shape[1]):
         var = free_index[rows[:, side]]
         free = var >= 0
         row_index = var[free, None] * d + np.arange(d)  # (K', d)
         # B[row a of the pose block, column b of the query] = A[b, a]
-        B[row_index[:, :, None], columns[free][:, None, :]] = np.swapaxes(blocks[free, side], 1, 2)
-    return B
+        shape = (int(free.sum()), d, d)
+        row_parts.append(np.broadcast_to(row_index[:, :, None], shape).ravel())
+        column_parts.append(np.broadcast_to(columns[free][:, None, :], shape).ravel())
+        value_parts.append(np.swapaxes(blocks[free, side], 1, 2).ravel())
+    return sp.csc_matrix(
+        (np.concatenate(value_parts), (np.concatenate(row_parts), np.concatenate(column_parts))),
+        shape=(problem.pattern.size, num_queries * d),
+    )
+
+
+def _solved_columns(
+    B: sp.csc_matrix, covariance_solve: Callable[[np.ndarray], np.ndarray], group: int
+) -> Iterator[tuple[slice, np.ndarray]]:
+    """`(columns, H^-1 B[:, columns])` over consecutive groups of whole `group`-column blocks, so that
+    at most about `_MAX_RHS_VALUES` values of dense right-hand side exist at once."""
+    n, width = B.shape
+    chunk = max(group, _MAX_RHS_VALUES // max(n, 1) // group * group)
+    for start in range(0, width, chunk):
+        columns = slice(start, min(start + chunk, width))
+        yield columns, covariance_solve(B[:, columns].toarray())
 
 
 def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -78,14 +99,12 @@ def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> n
     if n == 0:
         return out
     covariance_solve = covariance_solver(problem, poses)
-    chunk = max(1, _MAX_RHS_VALUES // (n * d))
-    for start in range(0, len(rows), chunk):
-        part = rows[start : start + chunk, None]
-        B = _transposed_jacobians(problem, part, np.broadcast_to(np.eye(d), (len(part), 1, d, d)))
-        X = covariance_solve(B)
-        # the k-th diagonal block of B^T X
-        Bk, Xk = (M.T.reshape(len(part), d, n) for M in (B, X))
-        out[start : start + len(part)] = Bk @ np.swapaxes(Xk, 1, 2)
+    B = _transposed_jacobians(problem, rows[:, None], np.broadcast_to(np.eye(d), (len(rows), 1, d, d)))
+    for columns, X in _solved_columns(B, covariance_solve, d):
+        # the diagonal d x d blocks of B^T H^-1 B over these columns (B is sparse: a cheap product)
+        count = (columns.stop - columns.start) // d
+        blocks = (B[:, columns].T @ X).reshape(count, d, count, d)
+        out[columns.start // d : columns.stop // d] = blocks[np.arange(count), :, np.arange(count), :]
     return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
@@ -117,7 +136,9 @@ def innovations(
         B = _transposed_jacobians(problem, loops.edges, blocks)
         if covariance_solve is None:
             covariance_solve = covariance_solver(problem, poses)
-        S = B.T @ covariance_solve(B)
+        transposed = B.T.tocsr()
+        for columns, X in _solved_columns(B, covariance_solve, d):
+            S[:, columns] = transposed @ X
         S = 0.5 * (S + S.T)
     block = np.arange(len(e))[:, None] * d + np.arange(d)  # (K, d) rows of each loop
     S[block[:, :, None], block[:, None, :]] += np.linalg.inv(loops.information)

@@ -19,8 +19,15 @@ of a graduation, a refinement on accepted edges) and CG otherwise. CG stops at a
 residual `||b - A x|| <= cg_tol ||b||` (1e-10: the steps equal the direct ones to the precision
 the solver's own stopping tests see). If it has not got there in `max_cg_iterations` (200, about
 one full factorization's time on sphere2500 with 50% false loops), or the trusted edges leave a
-pose unconstrained, the step is solved directly. The trusted pattern, its fill-reducing order
-and its symbolic analysis are computed once per distinct trusted set.
+pose unconstrained, the step is solved directly.
+
+The preconditioner's pattern, its fill-reducing order and its symbolic analysis are computed for
+the edges of weight at least `PATTERN_MARGIN * trust_weight`, and reused for every later trusted
+set of the same nonlinear solve that pattern contains (each of its edges enters the
+preconditioner with its current weight): as the map converges, loops come back into the trusted
+set a few hundred at a time, and an exact
+trusted set per analysis re-analysed the pattern 22 times in one stage on a 100 000-pose grid
+(1.5 s per analysis there: the block ordering and the pattern, more than CHOLMOD's symbolic step).
 
 Reference:
     J. R. Shewchuk, "An Introduction to the Conjugate Gradient Method Without the Agonizing
@@ -44,6 +51,12 @@ from egnc.normal_equations import NormalEquationsPattern
 LinearMethod = Literal["auto", "direct"]
 LINEAR_METHODS = ("auto", "direct")
 _CACHED_TRUSTED_SETS = 4  # symbolic analyses kept; a stage's trusted set settles after a few steps
+PATTERN_MARGIN = 1e-2
+"""A trusted pattern is analysed for the edges of weight at least `PATTERN_MARGIN * trust_weight`,
+and serves every later trusted set it contains: an edge must gain this factor in weight (its
+residual shrink by about 3 under Geman-McClure) to force a new analysis. A wider margin admits
+switched-off false loops' fill (1e-4 on city10000 at 50 % false loops: 3 analyses instead of 8,
+but 4x the factorization time); 1 is an analysis per distinct trusted set (BENCHMARKS.md)."""
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -57,11 +70,14 @@ class _TrustedSystem:
     """Pattern and solver of one trusted edge set, and where its unknowns sit in the full system.
 
     Attributes:
-        pattern: normal-equations pattern of the trusted edges, in its own fill-reducing order.
+        edges: `(E,)` bool, the edges of `pattern` (every edge of weight at least
+            `PATTERN_MARGIN * trust_weight` when it was analysed).
+        pattern: normal-equations pattern of those edges, in its own fill-reducing order.
         solver: linear solver analysed for `pattern`.
         unknowns: `(n,)` full-system index of each trusted-system unknown.
     """
 
+    edges: np.ndarray
     pattern: NormalEquationsPattern
     solver: LinearSolver
     unknowns: np.ndarray
@@ -70,7 +86,7 @@ class _TrustedSystem:
 def analysed_pattern(
     edges: np.ndarray, fixed: np.ndarray, d: int, backend: Literal["cholmod", "scipy"]
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
-    """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and a solver analysed for it.
+    """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`_OnFirstUse`).
 
     Args:
         edges: `(E, 2)` pose rows of the edges.
@@ -82,7 +98,38 @@ def analysed_pattern(
     joined = edges[~fixed[edges].any(axis=1)]
     order = block_order(backend, int(np.count_nonzero(~fixed)), free_block[joined])
     pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=backend == "cholmod", block_order=order)
-    return pattern, make_linear_solver(backend, pattern.indptr, pattern.indices, ordered=True)
+    return pattern, _OnFirstUse(backend, pattern)
+
+
+class _OnFirstUse:
+    """A `LinearSolver` whose symbolic analysis runs at its first factorization.
+
+    A robust problem's full pattern holds every false loop's fill-in, and its steps go through
+    the trusted preconditioner: the full analysis is needed only when a step falls back to the
+    direct solve. On a 100 000-pose grid with 30 % false loops CHOLMOD refuses to analyse it at
+    all ("problem too large": the factor would exceed its integer range).
+    """
+
+    name: str
+
+    def __init__(self, backend: Literal["cholmod", "scipy"], pattern: NormalEquationsPattern):
+        self.name = backend
+        self._pattern = pattern
+        self._solver: LinearSolver | None = None
+
+    def _analysed(self) -> LinearSolver:
+        if self._solver is None:
+            pattern = self._pattern
+            self._solver = make_linear_solver(self.name, pattern.indptr, pattern.indices, ordered=True)
+        return self._solver
+
+    def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
+        return self._analysed().solve(data, rhs)
+
+    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize the matrix with CSC values `data` `(nnz,)`; return `rhs -> A^-1 rhs`."""
+        return self._analysed().factorize(data)
 
 
 @dataclass
@@ -121,11 +168,21 @@ class StepSolver:
         self._edges, self._fixed, self._d, self._backend = edges, fixed, d, backend
         self.pattern, self.direct_solver = pattern, direct_solver
         self._components = 0  # of the whole graph, counted when a trusted set first needs it
-        self._trusted_systems: OrderedDict[bytes, _TrustedSystem | None] = OrderedDict()
+        self._trusted_systems: OrderedDict[bytes, _TrustedSystem] = OrderedDict()
+        self._given_systems: OrderedDict[bytes, _TrustedSystem | None] = OrderedDict()  # exact sets, kept
+        self.analyses = 0  # trusted patterns analysed
         self.statistics = LinearStatistics()
         self._data = np.empty(0)
         self._trusted: _TrustedSystem | None = None
         self._trusted_data = np.empty(0)
+
+    def start_solve(self) -> None:
+        """Begin a nonlinear solve: reset the statistics and forget the trusted patterns, so that
+        which superset preconditions a step, and so its rounding, does not depend on what earlier
+        solves of the same problem analysed (a solve's steps are then the same bit for bit
+        whether or not earlier GNC stages were solved)."""
+        self.statistics = LinearStatistics()
+        self._trusted_systems.clear()
 
     def set_system(
         self,
@@ -134,6 +191,7 @@ class StepSolver:
         weights: np.ndarray,
         method: LinearMethod = "auto",
         trust_weight: float = 1e-4,
+        trusted: np.ndarray | None = None,
     ) -> None:
         """Take the undamped `H` of one linearization.
 
@@ -141,17 +199,23 @@ class StepSolver:
             data: `(nnz,)` CSC data of `H` in `pattern`.
             products: `(E, 2d, 2d + 1)` per-edge products `H` was summed from (`edge_products`).
             weights: `(E,)` IRLS weights.
-            method: `"auto"` (CG preconditioned by the trusted edges when some edge is below
-                `trust_weight`) or `"direct"`.
-            trust_weight: weight from which an edge is in the preconditioner.
+            method: `"auto"` (CG preconditioned by the trusted edges when some edge is not
+                trusted) or `"direct"`.
+            trust_weight: weight from which an edge is trusted (in the preconditioner).
+            trusted: `(E,)` bool, the preconditioner's edges exactly, instead of those chosen by
+                `trust_weight`: a caller that keeps one set over many linearizations and solves
+                pays one analysis for it (its analysis outlives `start_solve`).
         """
         self._data = data
-        trusted = weights >= trust_weight
         self._trusted = None
-        if method == "auto" and not trusted.all():
-            self._trusted = self._trusted_system(trusted)
-            if self._trusted is not None:
-                self._trusted_data = self._trusted.pattern.scatter(products[trusted])[0]
+        if method == "auto" and trusted is not None:
+            self._trusted = None if trusted.all() else self._given_system(trusted)
+        elif method == "auto":
+            by_weight = weights >= trust_weight
+            if not by_weight.all():
+                self._trusted = self._trusted_system(by_weight, weights >= PATTERN_MARGIN * trust_weight)
+        if self._trusted is not None:
+            self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
 
     def solve(
         self, shift: np.ndarray, rhs: np.ndarray, cg_tol: float = 1e-10, max_cg_iterations: int = 200
@@ -231,28 +295,49 @@ class StepSolver:
 
         return multiply
 
-    def _trusted_system(self, trusted: np.ndarray) -> _TrustedSystem | None:
-        """The cached pattern and analysis of the `trusted` `(E,)` edge set, built on first use; None
-        when the trusted edges leave a pose unconstrained (they cannot precondition then)."""
+    def _trusted_system(self, trusted: np.ndarray, margin: np.ndarray) -> _TrustedSystem | None:
+        """A cached analysis whose edges contain the `trusted` `(E,)` edges, else one analysed for the
+        `margin` `(E,)` edges (a superset); None when those leave a pose unconstrained (they cannot
+        precondition then).
+
+        The preconditioner is then every edge of the pattern with its current weight: a split
+        `H = H_P + H_rest` for any edge set `P` that keeps `H_P` positive definite leaves CG exact.
+        """
+        for key, system in reversed(self._trusted_systems.items()):
+            if not np.any(trusted & ~system.edges):
+                self._trusted_systems.move_to_end(key)
+                return system
+        analysed = self._analysed_system(margin)
+        if analysed is not None:
+            self._trusted_systems[np.packbits(margin).tobytes()] = analysed
+            if len(self._trusted_systems) > _CACHED_TRUSTED_SETS:
+                self._trusted_systems.popitem(last=False)
+        return analysed
+
+    def _given_system(self, trusted: np.ndarray) -> _TrustedSystem | None:
+        """The analysis of exactly the `trusted` `(E,)` edges, cached across solves; None as above."""
         key = np.packbits(trusted).tobytes()
-        if key in self._trusted_systems:
-            self._trusted_systems.move_to_end(key)
-            return self._trusted_systems[key]
-        edges = self._edges[trusted]
+        if key not in self._given_systems:
+            self._given_systems[key] = self._analysed_system(trusted)
+            if len(self._given_systems) > _CACHED_TRUSTED_SETS:
+                self._given_systems.popitem(last=False)
+        self._given_systems.move_to_end(key)
+        return self._given_systems[key]
+
+    def _analysed_system(self, selected: np.ndarray) -> _TrustedSystem | None:
+        """Pattern and analysis of the `selected` `(E,)` edges; None when they leave a pose unconstrained."""
+        edges = self._edges[selected]
         if not self._components:
             self._components = connected_components(len(self._fixed), self._edges)[0]
-        system = None
-        if connected_components(len(self._fixed), edges)[0] == self._components:
-            pattern, solver = analysed_pattern(edges, self._fixed, self._d, self._backend)
-            # Unknown k of pose p sits at free_index[p] * d + k in either system.
-            free = np.flatnonzero(~self._fixed)
-            component = np.arange(self._d)
-            unknowns = np.empty(pattern.size, dtype=np.int64)
-            unknowns[(pattern.free_index[free][:, None] * self._d + component).ravel()] = (
-                self.pattern.free_index[free][:, None] * self._d + component
-            ).ravel()
-            system = _TrustedSystem(pattern, solver, unknowns)
-        self._trusted_systems[key] = system
-        if len(self._trusted_systems) > _CACHED_TRUSTED_SETS:
-            self._trusted_systems.popitem(last=False)
-        return system
+        if connected_components(len(self._fixed), edges)[0] != self._components:
+            return None
+        self.analyses += 1
+        pattern, solver = analysed_pattern(edges, self._fixed, self._d, self._backend)
+        # Unknown k of pose p sits at free_index[p] * d + k in either system.
+        free = np.flatnonzero(~self._fixed)
+        component = np.arange(self._d)
+        unknowns = np.empty(pattern.size, dtype=np.int64)
+        unknowns[(pattern.free_index[free][:, None] * self._d + component).ravel()] = (
+            self.pattern.free_index[free][:, None] * self._d + component
+        ).ravel()
+        return _TrustedSystem(selected.copy(), pattern, solver, unknowns)

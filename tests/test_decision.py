@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 import egnc
+import egnc.decision as decision_module
+import egnc.marginals as marginals_module
 from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import MAX_ROUNDS, sequentially_consistent
+from egnc.decision import MAX_ROUNDS, decide_outliers, sequentially_consistent, truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions
 from egnc.io import read_irl
@@ -208,3 +210,92 @@ def test_vertices_without_edges_do_not_switch_the_decision_off(tmp_path):
     result = solve(graph)
     assert np.isnan(result.stages[-1].mu_min)  # the decision rounds ran
     np.testing.assert_array_equal(~result.inliers, is_outlier)
+
+
+def test_decision_rounds_reach_a_fixed_point_where_they_used_to_alternate():
+    # A 2000-pose grid whose rounds from the guess alternated between two classifications until
+    # the round limit: true loops rejected at chi2.ppf(0.99) on one map came back through the
+    # innovation test on the next. Held to the readmission quantile, they stay.
+    graph = grid_world(2, 2000, seed=2).graph
+    clean = solve(graph, "l2")
+    corrupted = add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
+    result = solve(corrupted.graph, gnc_options=GncOptions(chordal_start=False))
+    rounds = [stage for stage in result.stages if stage.kind == "decision"]
+    assert len(rounds) < MAX_ROUNDS
+    assert result.warnings == ()
+    np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
+
+
+def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch):
+    # Force a cycle: every rejected loop is re-admitted, and the false ones fail again on the
+    # next map. The rounds stop at the repeat and keep the classification of lowest truncated
+    # cost in the cycle, with its least-squares map.
+    world = grid_world(2, 300, seed=3, noise_scale=0.3)
+    clean = solve(world.graph, "l2")
+    corrupted = add_false_loops(world.graph, 20, seed=4, reference_poses=clean.graph.poses)
+    graph, robust = corrupted.graph, corrupted.graph.is_loop_closure
+    solved = []  # (classification, truncated cost at its least-squares map) of every round
+
+    def readmit_all(problem, poses, factors, rejected, r, quantile):
+        solved.append((~rejected, truncated_cost(r, robust, 3, 0.99)))
+        return rejected
+
+    monkeypatch.setattr(decision_module, "readmitted", readmit_all)
+    factors = BetweenFactors.from_graph(graph)
+    inliers = ~corrupted.is_outlier
+    decision = decide_outliers(
+        graph, to_matrices(2, graph.poses), robust, SolverOptions(), GncOptions(), "auto", factors, inliers=inliers
+    )
+    assert len(decision.reports) == len(solved) < MAX_ROUNDS  # stopped at the repeat, not at the limit
+    assert np.array_equal(solved[0][0], inliers) and not np.array_equal(solved[1][0], inliers)
+    # a classification the rounds solved, no costlier than the last one (which is in the cycle)
+    best, cost = next(pair for pair in solved if np.array_equal(pair[0], decision.inliers))
+    assert decision.truncated_cost == cost <= solved[-1][1]
+    assert cost < max(pair[1] for pair in solved[1:])  # the cycle did offer a choice
+    refit = solve(graph.subgraph_edges(best), "l2", known_inliers="none")
+    np.testing.assert_allclose(decision.poses, to_matrices(2, refit.graph.poses), atol=1e-6)
+
+
+def test_covariances_solved_in_column_groups_equal_one_solve(monkeypatch):
+    # The right-hand sides are solved a few columns at a time to bound memory on large maps.
+    world = grid_world(2, 200, seed=8, noise_scale=0.5)
+    graph = world.graph
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[np.flatnonzero(graph.is_loop_closure)[:5]] = True
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out))
+    poses = to_matrices(2, solve(graph.subgraph_edges(~left_out), "l2").graph.poses)
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    rows = np.arange(0, 200, 7)
+    whole = innovations(problem, poses, loops), pose_covariances(problem, poses, rows)
+    monkeypatch.setattr(marginals_module, "_MAX_RHS_VALUES", 2 * problem.pattern.size * 3)  # 2 blocks of 3
+    grouped = innovations(problem, poses, loops), pose_covariances(problem, poses, rows)
+    for a, b in zip((*whole[0], whole[1]), (*grouped[0], grouped[1]), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+
+
+def test_the_bounds_that_spare_covariance_solves_hold():
+    # Readmission skips the covariance of a loop with r^2 below the threshold (its innovation
+    # statistic is at most r^2) and of a batch whose statistics all exceed a floor that holds
+    # for well-determined loops. Both bounds, on loops left out of a map, true and false.
+    world = grid_world(2, 300, seed=11, noise_scale=0.5)
+    clean = solve(world.graph, "l2")
+    corrupted = add_false_loops(world.graph, 20, seed=12, reference_poses=clean.graph.poses)
+    graph = corrupted.graph
+    left_out = corrupted.is_outlier.copy()
+    left_out[np.flatnonzero(graph.is_loop_closure & ~corrupted.is_outlier)[::10]] = True
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out))
+    poses = to_matrices(2, solve(graph.subgraph_edges(~left_out), "l2").graph.poses)
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    e, S = innovations(problem, poses, loops)
+    d = 3
+    blocks = np.arange(len(e))[:, None] * d + np.arange(d)
+    S_kk = S[blocks[:, :, None], blocks[:, None, :]]
+    alone = np.einsum("ki,ki->k", e, np.linalg.solve(S_kk, e[:, :, None])[:, :, 0])
+    r = loops.whitened_norms(e)
+    assert np.all(alone <= r * r * (1 + 1e-12))
+    own = np.linalg.inv(loops.information)
+    well_determined = np.trace(S_kk - own, axis1=1, axis2=2) <= np.trace(own, axis1=1, axis2=2)
+    floor = decision_module._statistic_floor(loops, poses)
+    assert well_determined.sum() > 10
+    assert np.all(floor[well_determined] <= alone[well_determined] * (1 + 1e-12))
+    assert np.any(floor > chi2_quantile(0.9999, d))  # the floor does spare false loops

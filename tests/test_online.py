@@ -8,13 +8,16 @@ import numpy as np
 import pytest
 
 import egnc
+import egnc.online
 from egnc.datasets import add_false_loops
 from egnc.datasets.labels import read_labels
+from egnc.decision import Decision, truncated_cost
 from egnc.errors import EgncError, GraphError
 from egnc.factors import from_matrices, group_of, to_matrices
 from egnc.graph import PoseGraph
 from egnc.linear_solvers import cholmod_available
 from egnc.metrics import precision_recall
+from egnc.mu_star import mu_star
 from egnc.online import OnlineOptions, OnlineSolver
 from egnc.replay import replay, replay_steps
 
@@ -178,6 +181,9 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
     history = report.mu_history[:, 0]
     assert history.shape == (3,) and history[0] == 0.0 and history[2] == 1.0
     assert 0.5 < history[1] < 1.0
+    # mu* is the convexity boundary at the residual the first stage left (residual_history).
+    assert report.residual_history.shape == report.mu_history.shape
+    assert history[1] == pytest.approx(float(mu_star(report.residual_history[0, :1], 3.0)[0]), rel=1e-12)
 
 
 def test_egnc_schedule_takes_fewer_iterations_than_risam_on_the_same_updates():
@@ -287,3 +293,35 @@ def test_inputs_are_checked():
         solver.result()
     with pytest.raises(EgncError, match="online method"):
         OnlineSolver(2, "gnc-gm")
+    with pytest.raises(EgncError, match="rel_cost_tol"):
+        OnlineOptions(rel_cost_tol=1.0)
+
+
+def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
+    # The decision from the online estimate is replaced by one that keeps a false loop and drops the
+    # true one (what a map bent early can give on large graphs); the batch solve from odometry sees
+    # both loops at once, its truncated cost is lower, and result() keeps it.
+    solver, information = _chain("egnc")
+    false = solver.add_loop(0, 10, [7.0, 0.0, 0.0], information)
+    true = solver.add_loop(0, 10, [10.0, 0.0, 0.0], information)
+    solver.update()
+    factors, robust = solver._current_factors(), solver.is_loop_closure
+    wrong = np.ones(solver.num_edges, dtype=bool)
+    wrong[true] = False
+    bent = solver.result(decide=False).graph.poses.copy()
+    bent[:, 0] *= 0.7  # the map the false loop alone explains
+    bent_T = to_matrices(2, bent)
+    r = factors.whitened_norms(factors.residuals(bent_T))
+    bent_cost = truncated_cost(r, robust, 3, solver.gnc_options.outlier_quantile)
+    monkeypatch.setattr(
+        egnc.online, "decide_outliers", lambda *args, **kwargs: Decision(bent_T, wrong, (), True, bent_cost)
+    )
+    result = solver.result()
+    assert "batch solve" in result.message and result.start in ("guess", "chordal")
+    assert result.rejected_edges.tolist() == [false]
+    assert result.truncated_cost < bent_cost
+    assert abs(result.graph.poses[10, 0] - 10.0) < 0.05
+
+    monkeypatch.undo()  # the real decision from the online estimate is right here: it is kept
+    kept = solver.result()
+    assert kept.start == "online" and kept.rejected_edges.tolist() == [false]

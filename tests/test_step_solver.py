@@ -13,6 +13,7 @@ from egnc.kernels import make_kernel
 from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
 from egnc.normal_equations import edge_products
+from egnc.step_solver import PATTERN_MARGIN
 
 BACKENDS = [
     "scipy",
@@ -101,3 +102,61 @@ def test_linear_method_options_are_checked():
         SolverOptions(linear_method="cg")  # type: ignore[arg-type]
     with pytest.raises(OptionError, match="trust_weight"):
         SolverOptions(trust_weight=0.0)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_growing_trusted_set_reuses_the_analysis_that_contains_it(corrupted, backend):
+    graph = corrupted.graph
+    problem = Problem.from_graph(graph, backend)
+    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+    steps = problem.step_solver
+    shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
+    steps.set_system(data, products, weights, "direct")
+    direct = steps.solve(shift, gradient)
+    trust = 1e-4
+    loops = np.flatnonzero(graph.is_loop_closure)
+    margin = PATTERN_MARGIN * trust
+    untrusted = loops[weights[loops] < trust]
+    below, within = untrusted[:3], untrusted[3:]  # below the margin, and within it
+    weights = weights.copy()
+    weights[below] = 0.1 * margin
+    weights[within] = np.maximum(weights[within], margin)
+    assert len(within)
+    # the first trusted set, then one grown by loops already inside its pattern's margin: one analysis
+    for grown in (False, True):
+        moved = weights.copy()
+        if grown:
+            moved[within] = trust  # trusted now, and still in the first pattern
+        steps.set_system(data, products, moved, "auto", trust_weight=trust)
+        step = steps.solve(shift, gradient)
+        np.testing.assert_allclose(step, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+    assert steps.analyses == 1 and steps.statistics.cg_fallbacks == 0
+    # a loop that climbs from below the margin into the trusted set needs a new analysis
+    moved[below[0]] = trust
+    steps.set_system(data, products, moved, "auto", trust_weight=trust)
+    np.testing.assert_allclose(steps.solve(shift, gradient), direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+    assert steps.analyses == 2
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_given_trusted_set_is_analysed_once_across_solves(corrupted, backend):
+    graph = corrupted.graph
+    problem = Problem.from_graph(graph, backend)
+    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+    steps = problem.step_solver
+    shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
+    steps.set_system(data, products, weights, "direct")
+    direct = steps.solve(shift, gradient)
+    # The online solver's set: every edge but a few loops of full weight (new loops), which CG takes.
+    given = np.ones(graph.num_edges, dtype=bool)
+    given[np.flatnonzero(graph.is_loop_closure)[:5]] = False
+    for _ in range(2):  # two nonlinear solves: the given set's analysis outlives start_solve
+        steps.start_solve()
+        steps.set_system(data, products, weights, "auto", trusted=given)
+        step = steps.solve(shift, gradient)
+        np.testing.assert_allclose(step, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+        assert steps.statistics.cg_solves == 1 and steps.statistics.cg_fallbacks == 0
+    assert steps.analyses == 1
+    steps.set_system(data, products, weights, "auto", trusted=np.ones(graph.num_edges, dtype=bool))
+    steps.solve(shift, gradient)
+    assert steps.statistics.direct_solves == 1  # every edge given: the direct path
