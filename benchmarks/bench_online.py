@@ -145,8 +145,8 @@ def main() -> int:
             print(
                 f"| {name} | {percent:.0f} | {row['method']} | {row['P']:.4f} | {row['R']:.4f} | {row['P_now']:.4f}"
                 f" | {row['R_now']:.4f} | {row['ate']:.4f} | {row['updates']} | {row['loop_updates']}"
-                f" | {row['iterations']} | {row['total_s']:.1f} | {row['decide_s']:.2f} | {row['kept']} | {row['p50']:.1f}"
-                f" | {row['p99']:.1f} | {row['max']:.1f} | {row['loop_p50']:.1f} | {ratio} |",
+                f" | {row['iterations']} | {row['total_s']:.1f} | {row['decide_s']:.2f} | {row['kept']}"
+                f" | {row['p50']:.1f} | {row['p99']:.1f} | {row['max']:.1f} | {row['loop_p50']:.1f} | {ratio} |",
                 flush=True,
             )
             if args.json is not None:
