@@ -154,9 +154,9 @@ def test_cli_runs_the_grid_quietly_and_reports_usage_errors(tmp_path):
 def test_a_run_over_the_time_limit_is_reported_as_timeout(tmp_path):
     world = grid_world(2, 4000, seed=11, noise_scale=0.3)
     write_g2o(world.graph, tmp_path / "big.g2o")
-    (record,) = run_grid([tmp_path / "big.g2o"], [30], [1], ["risam"], time_limit_s=0.3)
+    (record,) = run_grid([tmp_path / "big.g2o"], [30], [1], ["risam"], time_limit_s=0.02)
     assert record.status == "timeout"
-    assert 0.3 <= record.wall_s < 10.0
+    assert 0.02 <= record.wall_s < 10.0
     assert math.isnan(record.precision) and not record.success
 
 
