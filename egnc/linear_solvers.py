@@ -15,9 +15,12 @@ each pose's `d` unknowns together, which suits supernodes.
   of an iteration. On 2 shared cores each doubled the factorization (see BENCHMARKS.md).
 - `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (diagonal pivoting),
   which is how SuperLU is best used on SPD matrices. Its minimum-degree ordering on `A + A^T`
-  is computed once on the pose graph; the factorizations then take the matrix in natural order
-  instead of reordering it every time. SciPy has no sparse Cholesky; this is the
-  always-available fallback.
+  is computed once on the pose graph and then postordered (`postorder`); the factorizations
+  take the matrix in that order instead of reordering it every time. The postorder matters:
+  SuperLU finds its supernodes among consecutive columns but, in symmetric mode, does not
+  postorder the elimination tree itself; with the same fill, a 100k-pose grid factorizes 7x
+  faster (BENCHMARKS.md, issue 18). SciPy has no sparse Cholesky; this is the always-available
+  fallback.
 """
 
 from __future__ import annotations
@@ -173,7 +176,37 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
     from scipy.sparse.linalg import splu
 
     lu = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    return np.argsort(lu.perm_c).astype(np.int64)
+    # Diagonal pivots (threshold 0 on a diagonally dominant matrix): L's rows are in column order too.
+    return np.argsort(lu.perm_c)[postorder(lu.L)].astype(np.int64)
+
+
+def postorder(factor: sp.spmatrix) -> np.ndarray:
+    """A postorder of the elimination tree of a Cholesky-like factor.
+
+    The parent of column `k` is the first row below the diagonal that holds a nonzero of column
+    `k` of `factor`. Reordering by a postorder keeps the fill and makes each supernode (columns
+    with nested patterns) a run of consecutive columns.
+
+    Args:
+        factor: `(n, n)` lower-triangular factor (stored zeros are ignored).
+
+    Returns:
+        `(n,)` the columns in postorder: children before parents, every subtree contiguous.
+    """
+    # Imported here, as splu is: the CHOLMOD path never needs either (tests/test_import.py).
+    from scipy.sparse.csgraph import depth_first_order
+
+    lower = sp.tril(factor, -1, format="csc")
+    lower.eliminate_zeros()
+    lower.sort_indices()
+    n = lower.shape[0]
+    has_parent = np.diff(lower.indptr) > 0
+    parent = np.full(n, n)  # n: a virtual root above the roots of the forest
+    parent[has_parent] = lower.indices[lower.indptr[:-1][has_parent]]
+    children = sp.csr_matrix((np.ones(n), (parent, np.arange(n))), shape=(n + 1, n + 1))
+    preorder = depth_first_order(children, n, directed=True, return_predecessors=False)
+    # A preorder lists each subtree contiguously, its root first: reversed, the root comes last.
+    return np.asarray(preorder[:0:-1], dtype=np.int64)
 
 
 class CholmodSolver:
