@@ -7,8 +7,20 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from egnc.datasets import grid_world
-from egnc.linear_solvers import block_order, postorder
+import egnc
+from egnc.datasets import add_false_loops, grid_world
+from egnc.io import read_g2o
+from egnc.linear_solvers import (
+    NotPositiveDefiniteError,
+    RslabSolver,
+    block_order,
+    cholmod_available,
+    make_linear_solver,
+    postorder,
+    rslab_available,
+)
+
+needs_rslab = pytest.mark.skipif(not rslab_available(), reason="no rslab")
 
 
 def elimination_tree(matrix: np.ndarray) -> np.ndarray:
@@ -77,3 +89,50 @@ def test_scipy_block_order_keeps_the_fill_of_minimum_degree_and_is_postordered()
 
     assert fill(order) == fill(minimum_degree)
     assert is_postordered(elimination_tree(matrix[np.ix_(order, order)]))
+
+
+@pytest.mark.parametrize(
+    ("backend", "lower_only"),
+    [("scipy", False), pytest.param("rslab", False, marks=needs_rslab), pytest.param("rslab", True, marks=needs_rslab)],
+)
+def test_factorization_solves_like_a_dense_solve(backend, lower_only):
+    matrix = random_spd(60, 0.08, seed=4)
+    stored = sp.csc_matrix(np.tril(matrix) if lower_only else matrix)
+    solver = make_linear_solver(backend, stored.indptr, stored.indices)
+    rng = np.random.default_rng(1)
+    b, B = rng.normal(size=60), rng.normal(size=(60, 4))
+    for values in (stored.data, 2.0 * stored.data):  # a second factorization of the same pattern
+        solve = solver.factorize(values)
+        dense = matrix * values[0] / stored.data[0]
+        np.testing.assert_allclose(solve(b), np.linalg.solve(dense, b), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(solve(B), np.linalg.solve(dense, B), rtol=1e-10, atol=1e-12)
+
+
+@needs_rslab
+def test_rslab_reports_indefinite_and_singular_matrices_as_not_positive_definite():
+    pattern = sp.csc_matrix(np.tril(np.ones((3, 3))))
+    solver = RslabSolver(pattern.indptr, pattern.indices)
+    positive = np.array([[4.0, 1, 0], [1, 3, 1], [0, 1, 2]])
+    indefinite = np.array([[4.0, 1, 0], [1, -3, 1], [0, 1, 2]])
+    singular = np.array([[1.0, 1, 0], [1, 1, 0], [0, 0, 2]])
+
+    def lower_data(matrix: np.ndarray) -> np.ndarray:
+        return matrix[pattern.indices, np.repeat(np.arange(3), np.diff(pattern.indptr))]
+
+    np.testing.assert_allclose(solver.solve(lower_data(positive), np.ones(3)), np.linalg.solve(positive, np.ones(3)))
+    for matrix in (indefinite, singular):
+        with pytest.raises(NotPositiveDefiniteError):
+            solver.factorize(lower_data(matrix))
+
+
+@needs_rslab
+@pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
+def test_rslab_and_cholmod_give_the_same_robust_solve_of_sphere2500(dataset_path):
+    graph = read_g2o(dataset_path("sphere2500.g2o"))
+    reference = egnc.solve(graph, "l2", linear_solver="cholmod")
+    corrupted = add_false_loops(graph, 10, seed=1, reference_poses=reference.graph.poses).graph
+    results = {backend: egnc.solve(corrupted, linear_solver=backend) for backend in ("cholmod", "rslab")}
+    assert results["rslab"].linear_solver == "rslab"
+    np.testing.assert_array_equal(results["rslab"].inliers, results["cholmod"].inliers)
+    assert [s.iterations for s in results["rslab"].stages] == [s.iterations for s in results["cholmod"].stages]
+    np.testing.assert_allclose(results["rslab"].graph.poses, results["cholmod"].graph.poses, rtol=0, atol=1e-8)
