@@ -50,11 +50,13 @@ CHOLMOD_HINT_MIN_POSES = {2: 30_000, 3: 3_000}
 """Graph sizes (poses, by dimension) from which a SciPy-only `egnc-solve` names the `rslab` and `cholmod` extras.
 
 Measured with the default method, SciPy's SuperLU against CHOLMOD (2 shared cores, so absolute
-times are high): 3D grid worlds of 2000 / 3500 / 5000 poses 0.8 / 3.1 / 6.1 s against
-0.2 / 0.4 / 0.9 s; sphere2500 1.1 against 0.5 s; SE-Sync's torus3D (5000 poses) 92 against 8 s;
-cubicle (5750) 215 against 34 s. In 2D the fill-in is smaller: city10000 2.9 against 0.9 s, a
-30000-pose grid world 6.6 against 2.3 s; but a 100 000-pose one with 10 % false loops took 129 s
-on CHOLMOD and had not finished after 11 minutes on SuperLU (BENCHMARKS.md, "Large graphs").
+times are high), before issue 18 postordered SuperLU's order (up to 7x faster factorizations on
+large 2D graphs; BENCHMARKS.md, "Pip-only sparse Cholesky"): 3D grid worlds of 2000 / 3500 /
+5000 poses 0.8 / 3.1 / 6.1 s against 0.2 / 0.4 / 0.9 s; sphere2500 1.1 against 0.5 s; SE-Sync's
+torus3D (5000 poses) 92 against 8 s; cubicle (5750) 215 against 34 s. In 2D the fill-in is
+smaller: city10000 2.9 against 0.9 s, a 30000-pose grid world 6.6 against 2.3 s; but a
+100 000-pose one with 10 % false loops took 129 s on CHOLMOD and had not finished after 11
+minutes on SuperLU (BENCHMARKS.md, "Large graphs").
 """
 
 EXAMPLES = """examples:
