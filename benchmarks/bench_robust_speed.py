@@ -164,11 +164,11 @@ def import_times(top: int = 12) -> list[tuple[int, int, str]]:
 
 
 def versions() -> str:
-    """Python, NumPy, SciPy, scikit-sparse versions and the core count."""
+    """Python, NumPy, SciPy, scikit-sparse, rslab versions and the core count."""
     from importlib.metadata import PackageNotFoundError, version
 
     found = []
-    for package in ("numpy", "scipy", "scikit-sparse"):
+    for package in ("numpy", "scipy", "scikit-sparse", "rslab"):
         try:
             found.append(f"{package} {version(package)}")
         except PackageNotFoundError:

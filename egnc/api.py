@@ -55,7 +55,7 @@ class Result:
     Attributes:
         graph: the input graph with optimized poses.
         method: the method used.
-        linear_solver: the linear backend used, `"cholmod"` or `"scipy"`.
+        linear_solver: the linear backend used, `"cholmod"`, `"rslab"` or `"scipy"`.
         residual_norms: `(E,)` whitened residual norms `r` at the solution (never kernel-scaled);
             for graduated methods the solution is the least-squares optimum of the accepted edges.
         weights: `(E,)` IRLS weight of each edge at the end of the last GNC stage (1 for known
@@ -219,8 +219,8 @@ def solve(
             on every shared dataset, with or without false loops, it did at least as well as the
             others; `"chordal"` reaches better least-squares minima from a drifted guess but is
             distorted by false loops), `"odometry"` or `"chordal"`.
-        linear_solver: `"auto"` (CHOLMOD when scikit-sparse is importable, else SciPy),
-            `"cholmod"` or `"scipy"`.
+        linear_solver: `"auto"` (the first importable of CHOLMOD (scikit-sparse) and rslab, else
+            SciPy), `"cholmod"`, `"rslab"` or `"scipy"`.
         options: options of each stage's GN/LM solve (tolerances, iteration limit).
         gnc_options: kernel shape, threshold convention, outlier quantile, stage limit.
         on_stage: called with each `StageReport` as soon as its stage ends (e.g. to show

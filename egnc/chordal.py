@@ -56,7 +56,7 @@ def chordal_initialization(
             returned exactly as given. No other pose of `graph.poses` is read.
         weights: optional `(E,)` factors in [0, 1] multiplying each edge's information (e.g. the
             weights of a robust kernel); an edge with weight 0 is ignored.
-        linear_solver: `"auto"`, `"cholmod"` or `"scipy"`, as in `egnc.solve`.
+        linear_solver: `"auto"`, `"cholmod"`, `"rslab"` or `"scipy"`, as in `egnc.solve`.
 
     Returns:
         `(N, P)` float64 poses in the graph's parametrization (`(x, y, theta)` or
@@ -120,7 +120,7 @@ def chordal_rotations(
         rotation_weights: `(E,)` scalar precision of each edge's rotation (>= 0).
         anchored: `(N,)` bool, the gauge rotations (at least one).
         anchor_rotations: `(A, d, d)` the rotations of the anchored poses, in row order.
-        linear_solver: `"auto"`, `"cholmod"` or `"scipy"`.
+        linear_solver: `"auto"`, `"cholmod"`, `"rslab"` or `"scipy"`.
 
     Returns:
         `(N, d, d)` rotation matrices; anchored ones exactly as given.
@@ -160,7 +160,7 @@ def translations_given_rotations(
             information (1/m^2), in pose j's frame.
         anchored: `(N,)` bool, the gauge poses (at least one).
         anchor_translations: `(A, d)` translations of the anchored poses, metres.
-        linear_solver: `"auto"`, `"cholmod"` or `"scipy"`.
+        linear_solver: `"auto"`, `"cholmod"`, `"rslab"` or `"scipy"`.
 
     Returns:
         `(N, d)` translations, metres; anchored ones exactly as given.

@@ -238,7 +238,7 @@ def run_gnc(
         robust: `(E,)` bool, edges the schedule's kernel applies to.
         solver_options: options of each stage's GN/LM solve.
         gnc_options: stage limit and stage protocol (`warm_start`).
-        linear_solver: resolved backend name, `"cholmod"` or `"scipy"`.
+        linear_solver: resolved backend name, `"cholmod"`, `"rslab"` or `"scipy"`.
         factors: the graph's factors, built once per solve.
         on_stage: called with each `StageReport` as soon as its stage ends (progress display).
         on_iteration: called with `(iterations, cost)` after each accepted step of a stage.

@@ -1,9 +1,10 @@
 """Sparse symmetric positive-definite solvers for the normal equations, behind one interface.
 
-Both order the unknowns once, at the level of the `d x d` pose blocks (`block_order`): the
-normal-equations pattern is then built in that order, and every factorization uses it as is.
-A block ordering is cheaper to compute than a scalar one (N instead of d N vertices) and keeps
-each pose's `d` unknowns together, which suits supernodes.
+`cholmod` and `scipy` order the unknowns once, at the level of the `d x d` pose blocks
+(`block_order`): the normal-equations pattern is then built in that order, and every
+factorization uses it as is. A block ordering is cheaper to compute than a scalar one (N instead
+of d N vertices) and keeps each pose's `d` unknowns together, which suits supernodes. `rslab`
+orders the scalar matrix itself.
 
 - `cholmod`: CHOLMOD through scikit-sparse (optional extra). AMD on the pose graph; the
   symbolic factorization is computed once per pattern and each solve only refactorizes
@@ -13,11 +14,19 @@ each pose's `d` unknowns together, which suits supernodes.
   OpenMP loop with a compiled-in team of 4 threads, far too little work for a fork/join per
   supernode, and OpenBLAS's worker threads must be woken for every call after the NumPy phases
   of an iteration. On 2 shared cores each doubled the factorization (see BENCHMARKS.md).
+- `rslab`: the supernodal `L D L^T` of the rslab package (optional extra, a Rust wheel that
+  `pip install` alone brings, no system library). Its analysis (its own fill-reducing ordering
+  of the scalar matrix, elimination tree, supernodes) is computed once per pattern and each
+  solve refactorizes numerically, on the calling thread. It reads the lower triangle. A factor
+  with a negative or zero pivot is reported as not positive definite.
 - `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (diagonal pivoting),
   which is how SuperLU is best used on SPD matrices. Its minimum-degree ordering on `A + A^T`
-  is computed once on the pose graph; the factorizations then take the matrix in natural order
-  instead of reordering it every time. SciPy has no sparse Cholesky; this is the
-  always-available fallback.
+  is computed once on the pose graph and then postordered (`postorder`); the factorizations
+  take the matrix in that order instead of reordering it every time. The postorder matters:
+  SuperLU finds its supernodes among consecutive columns but, in symmetric mode, does not
+  postorder the elimination tree itself; with the same fill, a 100k-pose grid factorizes 7x
+  faster (BENCHMARKS.md, issue 18). SciPy has no sparse Cholesky; this is the always-available
+  fallback.
 """
 
 from __future__ import annotations
@@ -36,9 +45,15 @@ import scipy.sparse as sp
 
 from egnc.errors import EgncError, SolverError
 
-LinearSolverName = Literal["auto", "cholmod", "scipy"]
-LINEAR_SOLVERS = ("auto", "cholmod", "scipy")
+LinearSolverName = Literal["auto", "cholmod", "rslab", "scipy"]
+LINEAR_SOLVERS = ("auto", "cholmod", "rslab", "scipy")
 """The `linear_solver` names `resolve_name` accepts (`egnc-solve --linear-solver`)."""
+Backend = Literal["cholmod", "rslab", "scipy"]
+"""A resolved backend name."""
+_INSTALL = {
+    "cholmod": "scikit-sparse: pip install 'egnc[cholmod]' (after apt-get install libsuitesparse-dev)",
+    "rslab": "rslab: pip install 'egnc[rslab]'",
+}
 
 
 class NotPositiveDefiniteError(SolverError):
@@ -64,20 +79,34 @@ def cholmod_available() -> bool:
     return importlib.util.find_spec("sksparse") is not None
 
 
-def resolve_name(name: str) -> Literal["cholmod", "scipy"]:
-    """Turn `"auto"` into the fastest available backend; reject unknown or missing backends."""
+def rslab_available() -> bool:
+    """Whether the rslab package can be imported."""
+    return importlib.util.find_spec("rslab") is not None
+
+
+def resolve_name(name: str) -> Backend:
+    """Turn `"auto"` into the fastest available backend; reject unknown or missing backends.
+
+    `"auto"` prefers `cholmod`, then `rslab`, then `scipy` (BENCHMARKS.md, issue 18).
+    """
     if name == "auto":
-        return "cholmod" if cholmod_available() else "scipy"
+        return "cholmod" if cholmod_available() else "rslab" if rslab_available() else "scipy"
     if name == "cholmod":
         if not cholmod_available():
-            raise EgncError(
-                "linear solver 'cholmod' needs scikit-sparse: pip install 'egnc[cholmod]' "
-                "(after apt-get install libsuitesparse-dev)"
-            )
+            raise EgncError(f"linear solver 'cholmod' needs {_INSTALL['cholmod']}")
         return "cholmod"
+    if name == "rslab":
+        if not rslab_available():
+            raise EgncError(f"linear solver 'rslab' needs {_INSTALL['rslab']}")
+        return "rslab"
     if name == "scipy":
         return "scipy"
-    raise EgncError(f"unknown linear solver {name!r}: choose 'auto', 'cholmod' or 'scipy'")
+    raise EgncError(f"unknown linear solver {name!r}: choose 'auto', 'cholmod', 'rslab' or 'scipy'")
+
+
+def lower_triangle_only(name: str) -> bool:
+    """Whether backend `name` reads only the lower triangle of the matrix (so patterns store just that)."""
+    return name in ("cholmod", "rslab")
 
 
 def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc_matrix:
@@ -148,7 +177,8 @@ def _cholmod_module() -> ModuleType:
 
 
 def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarray:
-    """Fill-reducing order of the unknown blocks for backend `name` (`"cholmod"` or `"scipy"`).
+    """Fill-reducing order of the unknown blocks for backend `name` (the identity for `"rslab"`,
+    which orders the scalar matrix itself).
 
     Args:
         name: resolved backend name.
@@ -158,6 +188,8 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
     Returns:
         `(num_blocks,)` permutation: block `order[k]` goes to position `k` (`P A P^T = A[order][:, order]`).
     """
+    if name == "rslab":
+        return np.arange(num_blocks, dtype=np.int64)
     pairs = np.asarray(block_pairs, dtype=np.int64).reshape(-1, 2)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     rows, cols = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
@@ -173,7 +205,37 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
     from scipy.sparse.linalg import splu
 
     lu = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    return np.argsort(lu.perm_c).astype(np.int64)
+    # Diagonal pivots (threshold 0 on a diagonally dominant matrix): L's rows are in column order too.
+    return np.argsort(lu.perm_c)[postorder(lu.L)].astype(np.int64)
+
+
+def postorder(factor: sp.spmatrix) -> np.ndarray:
+    """A postorder of the elimination tree of a Cholesky-like factor.
+
+    The parent of column `k` is the first row below the diagonal that holds a nonzero of column
+    `k` of `factor`. Reordering by a postorder keeps the fill and makes each supernode (columns
+    with nested patterns) a run of consecutive columns.
+
+    Args:
+        factor: `(n, n)` lower-triangular factor (stored zeros are ignored).
+
+    Returns:
+        `(n,)` the columns in postorder: children before parents, every subtree contiguous.
+    """
+    # Imported here, as splu is: the CHOLMOD path never needs either (tests/test_import.py).
+    from scipy.sparse.csgraph import depth_first_order
+
+    lower = sp.tril(factor, -1, format="csc")
+    lower.eliminate_zeros()
+    lower.sort_indices()
+    n = lower.shape[0]
+    has_parent = np.diff(lower.indptr) > 0
+    parent = np.full(n, n)  # n: a virtual root above the roots of the forest
+    parent[has_parent] = lower.indices[lower.indptr[:-1][has_parent]]
+    children = sp.csr_matrix((np.ones(n), (parent, np.arange(n))), shape=(n + 1, n + 1))
+    preorder = depth_first_order(children, n, directed=True, return_predecessors=False)
+    # A preorder lists each subtree contiguously, its root first: reversed, the root comes last.
+    return np.asarray(preorder[:0:-1], dtype=np.int64)
 
 
 class CholmodSolver:
@@ -214,6 +276,49 @@ class CholmodSolver:
             return self.factor(rhs)
 
 
+class RslabSolver:
+    """rslab's supernodal `L D L^T` with the analysis done once, one thread."""
+
+    name = "rslab"
+
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False):
+        """Analyse the pattern (`ordered` is ignored: rslab chooses its own ordering)."""
+        import rslab
+
+        n = len(indptr) - 1
+        columns = np.repeat(np.arange(n), np.diff(indptr))
+        lower = indices >= columns
+        # Data slots of the lower triangle, or None when the pattern stores only that.
+        self._lower = None if lower.all() else np.flatnonzero(lower)
+        rows = indices[lower].astype(np.int32)
+        lower_indptr = np.concatenate([[0], np.cumsum(np.bincount(columns[lower], minlength=n))]).astype(np.int32)
+        pattern = sp.csc_matrix((np.ones(len(rows)), rows, lower_indptr), shape=(n, n))
+        self.symbolic = rslab.analyze(pattern, path="ldlt", threads=1)
+
+    def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """Factorize the analysed pattern with values `data` and solve for `rhs`."""
+        return self.factorize(data)(rhs)
+
+    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize the analysed pattern with values `data`; return `rhs -> A^-1 rhs` (`rhs`: `(n,)` or `(n, k)`)."""
+        values = np.ascontiguousarray(data if self._lower is None else data[self._lower], dtype=np.float64)
+        try:
+            factor = self.symbolic.factor(values)
+        except RuntimeError as error:  # rslab reports a zero pivot this way
+            raise NotPositiveDefiniteError(f"normal equations are singular ({error})") from None
+        _, negative, zero = factor.inertia
+        if negative or zero:
+            raise NotPositiveDefiniteError(
+                f"normal equations are not positive definite ({negative} negative, {zero} zero pivots)"
+            )
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            rhs = np.ascontiguousarray(rhs, dtype=np.float64)
+            return factor.solve(rhs) if rhs.ndim == 1 else factor.solve_many(rhs)
+
+        return solve
+
+
 class ScipySolver:
     """SuperLU in symmetric mode; refactorizes from scratch on every solve."""
 
@@ -246,10 +351,12 @@ class ScipySolver:
 
 
 def make_linear_solver(name: str, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False) -> LinearSolver:
-    """Create the backend `name` (`"cholmod"` or `"scipy"`, already resolved) for one CSC pattern.
+    """Create the backend `name` (a resolved `Backend`) for one CSC pattern.
 
     `ordered`: the pattern is already in a fill-reducing order (`block_order`); keep it.
     """
     if name == "cholmod":
         return CholmodSolver(indptr, indices, ordered)
+    if name == "rslab":
+        return RslabSolver(indptr, indices, ordered)
     return ScipySolver(indptr, indices, ordered)

@@ -197,7 +197,7 @@ class OnlineSolver:
     Args:
         dim: 2 (SE(2)) or 3 (SE(3)).
         method: `"egnc"` (per-loop `mu*` and the strong-outlier rule) or `"risam"`.
-        linear_solver: `"auto"`, `"cholmod"` or `"scipy"`.
+        linear_solver: `"auto"` or a backend of `egnc.linear_solvers.LINEAR_SOLVERS`.
         options: options of each GN/LM solve.
         gnc_options: kernel shape `c`, threshold conventions, outlier and re-admission quantiles
             (`warm_start`, `every_stage` and `max_stages` do not apply: online stages are always

@@ -45,7 +45,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from egnc.connectivity import connected_components
-from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, block_order, make_linear_solver
+from egnc.linear_solvers import (
+    Backend,
+    LinearSolver,
+    NotPositiveDefiniteError,
+    block_order,
+    lower_triangle_only,
+    make_linear_solver,
+)
 from egnc.normal_equations import NormalEquationsPattern
 
 LinearMethod = Literal["auto", "direct"]
@@ -84,7 +91,7 @@ class _TrustedSystem:
 
 
 def analysed_pattern(
-    edges: np.ndarray, fixed: np.ndarray, d: int, backend: Literal["cholmod", "scipy"]
+    edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
     """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`_OnFirstUse`).
 
@@ -97,7 +104,7 @@ def analysed_pattern(
     free_block = np.cumsum(~fixed) - 1
     joined = edges[~fixed[edges].any(axis=1)]
     order = block_order(backend, int(np.count_nonzero(~fixed)), free_block[joined])
-    pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=backend == "cholmod", block_order=order)
+    pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=lower_triangle_only(backend), block_order=order)
     return pattern, _OnFirstUse(backend, pattern)
 
 
@@ -112,7 +119,7 @@ class _OnFirstUse:
 
     name: str
 
-    def __init__(self, backend: Literal["cholmod", "scipy"], pattern: NormalEquationsPattern):
+    def __init__(self, backend: Backend, pattern: NormalEquationsPattern):
         self.name = backend
         self._pattern = pattern
         self._solver: LinearSolver | None = None
@@ -153,7 +160,7 @@ class StepSolver:
         edges: np.ndarray,
         fixed: np.ndarray,
         d: int,
-        backend: Literal["cholmod", "scipy"],
+        backend: Backend,
         pattern: NormalEquationsPattern,
         direct_solver: LinearSolver,
     ):

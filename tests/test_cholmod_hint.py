@@ -1,4 +1,4 @@
-"""`egnc-solve` names the `cholmod` extra when `auto` leaves a large graph to SciPy's SuperLU."""
+"""`egnc-solve` names the `rslab` and `cholmod` extras when `auto` leaves a large graph to SciPy's SuperLU."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from egnc.graph import PoseGraph
 from egnc.io import write_g2o
 
 INSTALL = 'pip install "egnc[cholmod]"'
+PIP_ONLY = 'pip install "egnc[rslab]"'
 
 
 def chain(dim: int, num_poses: int) -> PoseGraph:
@@ -30,15 +31,15 @@ def chain(dim: int, num_poses: int) -> PoseGraph:
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-def test_hint_from_the_measured_size_on_only_for_auto_without_scikit_sparse(dim):
+def test_hint_from_the_measured_size_on_only_for_auto_without_a_sparse_cholesky(dim):
     threshold = CHOLMOD_HINT_MIN_POSES[dim]
     large, small = chain(dim, threshold), chain(dim, threshold - 1)
-    hint = cholmod_hint(large, "auto", cholmod_installed=False)
-    assert hint is not None and INSTALL in hint and "libsuitesparse-dev" in hint
+    hint = cholmod_hint(large, "auto", cholesky_installed=False)
+    assert hint is not None and INSTALL in hint and PIP_ONLY in hint and "libsuitesparse-dev" in hint
     assert f"{threshold}-pose {dim}D graph" in hint
-    assert cholmod_hint(small, "auto", cholmod_installed=False) is None
-    assert cholmod_hint(large, "auto", cholmod_installed=True) is None
-    assert cholmod_hint(large, "scipy", cholmod_installed=False) is None  # asked for by name
+    assert cholmod_hint(small, "auto", cholesky_installed=False) is None
+    assert cholmod_hint(large, "auto", cholesky_installed=True) is None
+    assert cholmod_hint(large, "scipy", cholesky_installed=False) is None  # asked for by name
 
 
 def test_egnc_solve_prints_the_hint_once_and_not_under_quiet(tmp_path):
@@ -62,7 +63,7 @@ def test_egnc_solve_prints_the_hint_once_and_not_under_quiet(tmp_path):
     hints = [line for line in run.stderr.splitlines() if line.startswith(("hint", "run"))]
     assert len(hints) == 5, run.stderr
     assert hints[0] == "run ['--method', 'l2']"
-    assert hints[1].startswith("hint: scikit-sparse is not installed") and hints[1].endswith(INSTALL)
+    assert hints[1].startswith("hint: neither rslab nor scikit-sparse is installed") and hints[1].endswith(INSTALL)
     assert hints[2:] == [
         "run ['--method', 'l2', '-q']",
         "run ['--method', 'l2', '--linear-solver', 'scipy']",

@@ -14,11 +14,12 @@ from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
 from egnc.lie import se2, se3
-from egnc.linear_solvers import cholmod_available
+from egnc.linear_solvers import cholmod_available, rslab_available
 
 BACKENDS = [
     "scipy",
     pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+    pytest.param("rslab", marks=pytest.mark.skipif(not rslab_available(), reason="no rslab")),
 ]
 
 

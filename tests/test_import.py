@@ -17,7 +17,7 @@ import egnc
 PYPROJECT = Path(__file__).parents[1] / "pyproject.toml"
 
 # Optional dependencies (extras) that egnc must never need at import or for a SciPy solve.
-OPTIONAL = ("sksparse", "matplotlib", "gtsam")
+OPTIONAL = ("sksparse", "rslab", "matplotlib", "gtsam")
 
 
 def run_without_optional(script: str) -> subprocess.CompletedProcess:
@@ -90,12 +90,40 @@ def test_asking_for_cholmod_without_scikit_sparse_is_one_clear_error():
     assert "pip install 'egnc[cholmod]'" in line
 
 
+@pytest.mark.skipif(importlib.util.find_spec("rslab") is None, reason="no rslab")
+def test_auto_takes_rslab_without_scikit_sparse_and_names_the_extra_of_a_missing_backend():
+    script = """
+        import sys
+        sys.modules["sksparse"] = None
+        from egnc.errors import EgncError
+        from egnc.linear_solvers import resolve_name
+
+        assert resolve_name("auto") == "rslab"
+        sys.modules["rslab"] = None
+        assert resolve_name("auto") == "scipy"
+        try:
+            resolve_name("rslab")
+        except EgncError as error:
+            print(error)
+        """
+    run = subprocess.run([sys.executable, "-c", textwrap.dedent(script)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "linear solver 'rslab' needs rslab: pip install 'egnc[rslab]'"
+
+
 # Modules a least-squares `egnc-solve -o` never uses, with what importing them costs: scipy.stats
 # 0.5 s; scipy.optimize 0.1 s (mu* only); scipy.special 30-60 ms (mu*, untabulated chi-square
 # quantiles); scipy.sparse.csgraph 0.1 s with the scipy.sparse.linalg and scipy.linalg it pulls in
 # (only to grow a spanning tree for missing poses).
 NEVER_FOR_LEAST_SQUARES = ["scipy.stats", "scipy.optimize", "scipy.special", "scipy.sparse.csgraph", "matplotlib"]
-NEVER_AT_IMPORT = [*NEVER_FOR_LEAST_SQUARES, "scipy.sparse.linalg", "scipy.linalg", "sksparse", "egnc.datasets"]
+NEVER_AT_IMPORT = [
+    *NEVER_FOR_LEAST_SQUARES,
+    "scipy.sparse.linalg",
+    "scipy.linalg",
+    "sksparse",
+    "rslab",
+    "egnc.datasets",
+]
 
 
 def imported(script: str, heavy: list[str]) -> list[str]:

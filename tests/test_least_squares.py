@@ -10,11 +10,12 @@ from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares
-from egnc.linear_solvers import cholmod_available
+from egnc.linear_solvers import cholmod_available, rslab_available
 
 BACKENDS = [
     "scipy",
     pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+    pytest.param("rslab", marks=pytest.mark.skipif(not rslab_available(), reason="no rslab")),
 ]
 
 # GTSAM 4.3 LevenbergMarquardtOptimizer from each file's initial guess, prior sigma 1e-3 on the

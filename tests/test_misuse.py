@@ -19,12 +19,13 @@ from egnc.api import METHODS, marginal_covariances, solve
 from egnc.errors import OptionError, OptionTypeError
 from egnc.io import read_g2o, read_irl, write_g2o, write_irl
 from egnc.least_squares import NOTHING_TO_OPTIMIZE
-from egnc.linear_solvers import cholmod_available
+from egnc.linear_solvers import cholmod_available, rslab_available
 
 GRID2D = Path(__file__).parents[1] / "datasets" / "grid2d.g2o"
 BACKENDS = [
     "scipy",
     pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+    pytest.param("rslab", marks=pytest.mark.skipif(not rslab_available(), reason="no rslab")),
 ]
 TWO_POSES_ALL_FIXED = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0.5\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nFIX 0 1\n"
 

@@ -11,13 +11,14 @@ from egnc.errors import OptionError
 from egnc.factors import to_matrices
 from egnc.kernels import make_kernel
 from egnc.least_squares import Problem, SolverOptions
-from egnc.linear_solvers import cholmod_available
+from egnc.linear_solvers import cholmod_available, rslab_available
 from egnc.normal_equations import edge_products
 from egnc.step_solver import PATTERN_MARGIN
 
 BACKENDS = [
     "scipy",
     pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+    pytest.param("rslab", marks=pytest.mark.skipif(not rslab_available(), reason="no rslab")),
 ]
 
 

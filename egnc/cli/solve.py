@@ -36,7 +36,7 @@ from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
-from egnc.linear_solvers import LINEAR_SOLVERS, cholmod_available
+from egnc.linear_solvers import LINEAR_SOLVERS, resolve_name
 from egnc.online import ONLINE_METHODS
 from egnc.replay import latency_summary, replay
 from egnc.step_solver import LINEAR_METHODS
@@ -47,14 +47,16 @@ EXIT_NUMERICAL_FAILURE = 3
 """`Result.status` of a solve that produced non-finite numbers (`egnc.least_squares`)."""
 
 CHOLMOD_HINT_MIN_POSES = {2: 30_000, 3: 3_000}
-"""Graph sizes (poses, by dimension) from which a SciPy-only `egnc-solve` names the `cholmod` extra.
+"""Graph sizes (poses, by dimension) from which a SciPy-only `egnc-solve` names the `rslab` and `cholmod` extras.
 
 Measured with the default method, SciPy's SuperLU against CHOLMOD (2 shared cores, so absolute
-times are high): 3D grid worlds of 2000 / 3500 / 5000 poses 0.8 / 3.1 / 6.1 s against
-0.2 / 0.4 / 0.9 s; sphere2500 1.1 against 0.5 s; SE-Sync's torus3D (5000 poses) 92 against 8 s;
-cubicle (5750) 215 against 34 s. In 2D the fill-in is smaller: city10000 2.9 against 0.9 s, a
-30000-pose grid world 6.6 against 2.3 s; but a 100 000-pose one with 10 % false loops took 129 s
-on CHOLMOD and had not finished after 11 minutes on SuperLU (BENCHMARKS.md, "Large graphs").
+times are high), before issue 18 postordered SuperLU's order (up to 7x faster factorizations on
+large 2D graphs; BENCHMARKS.md, "Pip-only sparse Cholesky"): 3D grid worlds of 2000 / 3500 /
+5000 poses 0.8 / 3.1 / 6.1 s against 0.2 / 0.4 / 0.9 s; sphere2500 1.1 against 0.5 s; SE-Sync's
+torus3D (5000 poses) 92 against 8 s; cubicle (5750) 215 against 34 s. In 2D the fill-in is
+smaller: city10000 2.9 against 0.9 s, a 30000-pose grid world 6.6 against 2.3 s; but a
+100 000-pose one with 10 % false loops took 129 s on CHOLMOD and had not finished after 11
+minutes on SuperLU (BENCHMARKS.md, "Large graphs").
 """
 
 EXAMPLES = """examples:
@@ -253,7 +255,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         known_inliers = odometry if args.known_inliers == "odometry" else _known_inliers(args.known_inliers, graph)
         read_notes = _warning_notes(caught) + _duplicate_note(graph, args.input)
         _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
-        hint = None if args.quiet else cholmod_hint(graph, args.linear_solver, cholmod_available())
+        hint = None if args.quiet else cholmod_hint(graph, args.linear_solver, resolve_name("auto") != "scipy")
         if hint is not None:
             print(f"hint: {hint}", file=sys.stderr, flush=True)
         read_count = len(caught)
@@ -365,19 +367,20 @@ def _duplicate_note(graph: PoseGraph, input_path: Path) -> list[str]:
     ]
 
 
-def cholmod_hint(graph: PoseGraph, linear_solver: str, cholmod_installed: bool) -> str | None:
-    """The line suggesting the `cholmod` extra, for a large graph left to SciPy by `auto`; else None.
+def cholmod_hint(graph: PoseGraph, linear_solver: str, cholesky_installed: bool) -> str | None:
+    """The line suggesting a sparse Cholesky extra, for a large graph left to SciPy by `auto`; else None.
 
     Args:
         graph: the graph about to be solved.
         linear_solver: `--linear-solver`; asking for `scipy` by name gets no hint.
-        cholmod_installed: whether scikit-sparse can be imported.
+        cholesky_installed: whether `auto` finds a faster backend (scikit-sparse or rslab).
     """
-    if linear_solver != "auto" or cholmod_installed or graph.num_poses < CHOLMOD_HINT_MIN_POSES[graph.dim]:
+    if linear_solver != "auto" or cholesky_installed or graph.num_poses < CHOLMOD_HINT_MIN_POSES[graph.dim]:
         return None
     return (
-        f"scikit-sparse is not installed, so this {graph.num_poses}-pose {graph.dim}D graph is solved with SciPy's"
-        " SuperLU; CHOLMOD is several times faster at this size: apt-get install libsuitesparse-dev, then"
+        f"neither rslab nor scikit-sparse is installed, so this {graph.num_poses}-pose {graph.dim}D graph is"
+        " solved with SciPy's SuperLU; a sparse Cholesky is several times faster at this size:"
+        ' pip install "egnc[rslab]", or CHOLMOD: apt-get install libsuitesparse-dev, then'
         ' pip install "egnc[cholmod]"'
     )
 

@@ -1,0 +1,138 @@
+"""The linear-solver backends: fill-reducing block orders and factorizations against dense answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+import egnc
+from egnc.datasets import add_false_loops, grid_world
+from egnc.io import read_g2o
+from egnc.linear_solvers import (
+    NotPositiveDefiniteError,
+    RslabSolver,
+    block_order,
+    cholmod_available,
+    make_linear_solver,
+    postorder,
+    rslab_available,
+)
+
+needs_rslab = pytest.mark.skipif(not rslab_available(), reason="no rslab")
+
+
+def elimination_tree(matrix: np.ndarray) -> np.ndarray:
+    """`(n,)` parent of each column in the elimination tree of the SPD `matrix` (n for a root), densely."""
+    n = len(matrix)
+    L = np.linalg.cholesky(matrix)
+    structural = np.abs(L) > 1e-12 * np.abs(L).max()
+    return np.array([next((i for i in range(k + 1, n) if structural[i, k]), n) for k in range(n)])
+
+
+def random_spd(n: int, density: float, seed: int) -> np.ndarray:
+    """A random diagonally dominant symmetric matrix with a sparse pattern."""
+    rng = np.random.default_rng(seed)
+    upper = np.triu((rng.random((n, n)) < density) * -rng.random((n, n)), 1)
+    off = upper + upper.T
+    return off + np.diag(1.0 - off.sum(axis=1))
+
+
+def is_postordered(parent: np.ndarray) -> bool:
+    """Whether the columns are in a postorder of the tree `parent` `(n,)` (n for a root).
+
+    In a postorder each column's parent comes later, and the descendants of column k are the
+    columns k - size_k + 1 .. k - 1 (size_k counts k and its descendants).
+    """
+    n = len(parent)
+    if not np.all(parent > np.arange(n)):
+        return False
+    size = np.ones(n + 1, dtype=int)
+    for k in range(n):
+        size[parent[k]] += size[k]
+    first = np.arange(n) - size[:n] + 1
+    child = np.flatnonzero(parent < n)
+    return bool(np.all(first[parent[child]] <= first[child]))
+
+
+def test_is_postordered_tells_a_postorder_from_another_topological_order():
+    # 0 -> 4, 1 -> 3, 2 -> 4, 3 -> 4: the subtree {1, 3} is split by 2.
+    assert not is_postordered(np.array([4, 3, 4, 4, 5]))
+    assert is_postordered(np.array([4, 2, 4, 4, 5]))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_postorder_puts_children_first_and_keeps_every_subtree_contiguous(seed):
+    matrix = random_spd(40, 0.06, seed)
+    order = postorder(sp.csc_matrix(np.linalg.cholesky(matrix)))
+    assert sorted(order) == list(range(40))
+    assert is_postordered(elimination_tree(matrix[np.ix_(order, order)]))
+
+
+def test_scipy_block_order_keeps_the_fill_of_minimum_degree_and_is_postordered():
+    graph = grid_world(2, 400, seed=3).graph
+    pairs = graph.edges[(graph.edges != 0).all(axis=1)] - 1  # pose 0 fixed
+    n = graph.num_poses - 1
+    order = block_order("scipy", n, pairs)
+    assert sorted(order) == list(range(n))
+    rows, cols = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
+    adjacency = sp.csc_matrix((np.full(len(rows), -1.0), (rows, cols)), shape=(n, n))
+    adjacency.sum_duplicates()
+    matrix = (adjacency + sp.diags(1.0 - np.asarray(adjacency.sum(axis=0)).ravel())).toarray()
+    lu = splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    minimum_degree = np.argsort(lu.perm_c)
+    assert not is_postordered(elimination_tree(matrix[np.ix_(minimum_degree, minimum_degree)]))
+
+    def fill(order: np.ndarray) -> int:
+        return np.count_nonzero(np.abs(np.linalg.cholesky(matrix[np.ix_(order, order)])) > 1e-12)
+
+    assert fill(order) == fill(minimum_degree)
+    assert is_postordered(elimination_tree(matrix[np.ix_(order, order)]))
+
+
+@pytest.mark.parametrize(
+    ("backend", "lower_only"),
+    [("scipy", False), pytest.param("rslab", False, marks=needs_rslab), pytest.param("rslab", True, marks=needs_rslab)],
+)
+def test_factorization_solves_like_a_dense_solve(backend, lower_only):
+    matrix = random_spd(60, 0.08, seed=4)
+    stored = sp.csc_matrix(np.tril(matrix) if lower_only else matrix)
+    solver = make_linear_solver(backend, stored.indptr, stored.indices)
+    rng = np.random.default_rng(1)
+    b, B = rng.normal(size=60), rng.normal(size=(60, 4))
+    for values in (stored.data, 2.0 * stored.data):  # a second factorization of the same pattern
+        solve = solver.factorize(values)
+        dense = matrix * values[0] / stored.data[0]
+        np.testing.assert_allclose(solve(b), np.linalg.solve(dense, b), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(solve(B), np.linalg.solve(dense, B), rtol=1e-10, atol=1e-12)
+
+
+@needs_rslab
+def test_rslab_reports_indefinite_and_singular_matrices_as_not_positive_definite():
+    pattern = sp.csc_matrix(np.tril(np.ones((3, 3))))
+    solver = RslabSolver(pattern.indptr, pattern.indices)
+    positive = np.array([[4.0, 1, 0], [1, 3, 1], [0, 1, 2]])
+    indefinite = np.array([[4.0, 1, 0], [1, -3, 1], [0, 1, 2]])
+    singular = np.array([[1.0, 1, 0], [1, 1, 0], [0, 0, 2]])
+
+    def lower_data(matrix: np.ndarray) -> np.ndarray:
+        return matrix[pattern.indices, np.repeat(np.arange(3), np.diff(pattern.indptr))]
+
+    np.testing.assert_allclose(solver.solve(lower_data(positive), np.ones(3)), np.linalg.solve(positive, np.ones(3)))
+    for matrix in (indefinite, singular):
+        with pytest.raises(NotPositiveDefiniteError):
+            solver.factorize(lower_data(matrix))
+
+
+@needs_rslab
+@pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
+def test_rslab_and_cholmod_give_the_same_robust_solve_of_sphere2500(dataset_path):
+    graph = read_g2o(dataset_path("sphere2500.g2o"))
+    reference = egnc.solve(graph, "l2", linear_solver="cholmod")
+    corrupted = add_false_loops(graph, 10, seed=1, reference_poses=reference.graph.poses).graph
+    results = {backend: egnc.solve(corrupted, linear_solver=backend) for backend in ("cholmod", "rslab")}
+    assert results["rslab"].linear_solver == "rslab"
+    np.testing.assert_array_equal(results["rslab"].inliers, results["cholmod"].inliers)
+    assert [s.iterations for s in results["rslab"].stages] == [s.iterations for s in results["cholmod"].stages]
+    np.testing.assert_allclose(results["rslab"].graph.poses, results["cholmod"].graph.poses, rtol=0, atol=1e-8)
