@@ -167,6 +167,66 @@ def result_costs(
     )
 
 
+class DecidedFields(ResultCosts):
+    """The fields of a `Result` that follow from its decision (see its docstring)."""
+
+    iterations: int
+    warnings: tuple[str, ...]
+    start: str
+    settled: bool
+
+
+def decided_fields(
+    graph: PoseGraph,
+    result_poses: np.ndarray,
+    initial_r: np.ndarray,
+    r: np.ndarray,
+    inliers: np.ndarray,
+    robust: np.ndarray,
+    stages: tuple[StageReport, ...],
+    gnc_options: GncOptions,
+    *,
+    start: str,
+    settled: bool,
+    disputed: np.ndarray | None,
+) -> DecidedFields:
+    """Costs, iteration count, warnings, start and settledness of a `Result`.
+
+    Args:
+        graph: the graph at its initial guess.
+        result_poses: `(N, P)` the result's poses.
+        initial_r, r: `(E,)` whitened residual norms at the initial guess and at `result_poses`.
+        inliers: `(E,)` bool, the accepted edges.
+        robust: `(E,)` bool, the loop closures.
+        stages: every stage run (both starts' included).
+        gnc_options: the outlier test's options.
+        start, settled, disputed: the kept decision's start, whether it settled, and the loops the
+            other decision accepted where it rejects (None when only one start decided).
+    """
+    d = graph.tangent_dim
+    initial_fits = classify_inliers(initial_r, robust, d, gnc_options)
+    warnings = solve_warnings(
+        graph,
+        stages,
+        robust,
+        inliers,
+        initial_r,
+        r,
+        initial_fits,
+        result_poses,
+        start=start,
+        settled=settled,
+        disputed=disputed,
+    )
+    return DecidedFields(
+        **result_costs(initial_r, r, inliers, robust, d, gnc_options.outlier_quantile),
+        iterations=sum(stage.iterations for stage in stages),
+        warnings=warnings,
+        start=start,
+        settled=settled,
+    )
+
+
 def initial_guess(graph: PoseGraph, init: str, known_inliers: np.ndarray, linear_solver: str) -> np.ndarray:
     """`(N, P)` starting poses of a solve.
 
@@ -302,7 +362,6 @@ def solve(
     if method == "l2":  # plain least squares: nothing is rejected
         inliers = np.ones(graph.num_edges, dtype=bool)
     result_poses = from_matrices(graph.dim, poses)
-    initial_fits = classify_inliers(initial_r, robust, graph.tangent_dim, gnc_options)
     return Result(
         graph=graph.with_poses(result_poses),
         method=method,
@@ -312,30 +371,26 @@ def solve(
         mu=outcome.mu,
         known_inliers=known,
         inliers=inliers,
-        **result_costs(initial_r, r, inliers, robust, graph.tangent_dim, gnc_options.outlier_quantile),
-        iterations=sum(stage.iterations for stage in stages),
         stages=stages,
         status=status,
         message=message,
         time_s=time.perf_counter() - started,
         timings=outcome.timings,
         robust_residual_norms=robust_r,
-        warnings=solve_warnings(
+        init=init,
+        **decided_fields(
             graph,
-            stages,
-            robust,
-            inliers,
+            result_poses,
             initial_r,
             r,
-            initial_fits,
-            result_poses,
+            inliers,
+            robust,
+            stages,
+            gnc_options,
             start=start,
             settled=settled,
             disputed=disputed,
         ),
-        init=init,
-        start=start,
-        settled=settled,
     )
 
 

@@ -55,9 +55,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from egnc.api import Result, result_costs, solve
+from egnc.api import Result, decided_fields, solve
 from egnc.decision import decide_outliers
-from egnc.diagnostics import solve_warnings
 from egnc.errors import EgncError, GraphError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
 from egnc.gnc import GncOptions, StageReport, classify_inliers
@@ -713,8 +712,6 @@ class OnlineSolver:
             inliers = classify_inliers(r, robust, self._d, self.gnc_options)
         initial_r = factors.whitened_norms(factors.residuals(self._T_initial))
         result_poses = from_matrices(self.dim, poses)[order]
-        initial_fits = classify_inliers(initial_r, robust, self._d, self.gnc_options)
-        known = ~robust
         return Result(
             graph=sorted_graph.with_poses(result_poses),
             method=self.method,
@@ -722,32 +719,28 @@ class OnlineSolver:
             residual_norms=r,
             weights=weights,
             mu=self.mu,
-            known_inliers=known,
+            known_inliers=~robust,
             inliers=inliers,
-            **result_costs(initial_r, r, inliers, robust, self._d, self.gnc_options.outlier_quantile),
-            iterations=sum(stage.iterations for stage in stages),
             stages=stages,
             status=status,
             message=STATUS_MESSAGES.get(status, "no solve needed") + note,
             time_s=online_stage.time_s + time.perf_counter() - started,
             timings={},
             robust_residual_norms=robust_r,
-            warnings=solve_warnings(
+            init="online",
+            **decided_fields(
                 sorted_graph,
-                stages,
-                robust,
-                inliers,
+                result_poses,
                 initial_r,
                 r,
-                initial_fits,
-                result_poses,
+                inliers,
+                robust,
+                stages,
+                self.gnc_options,
                 start=start,
                 settled=settled,
                 disputed=disputed,
             ),
-            init="online",
-            start=start,
-            settled=settled,
         )
 
     def _batch_solve(self, graph: PoseGraph, robust: np.ndarray) -> Result:
