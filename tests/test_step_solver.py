@@ -40,6 +40,16 @@ def linearized_system(problem: Problem, graph, poses):
     return data, gradient, products, weights
 
 
+def damped_system_and_direct_step(graph, backend: str):
+    """The step solver of `graph`, its linearized system at the file's poses, an LM shift, and the direct step."""
+    problem = Problem.from_graph(graph, backend)
+    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+    steps = problem.step_solver
+    shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
+    steps.set_system(data, products, weights, "direct")
+    return steps, data, gradient, products, weights, shift, steps.solve(shift, gradient)
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_preconditioned_step_equals_the_direct_step(corrupted, backend):
     graph = corrupted.graph
@@ -108,12 +118,7 @@ def test_linear_method_options_are_checked():
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_growing_trusted_set_reuses_the_analysis_that_contains_it(corrupted, backend):
     graph = corrupted.graph
-    problem = Problem.from_graph(graph, backend)
-    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
-    steps = problem.step_solver
-    shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
-    steps.set_system(data, products, weights, "direct")
-    direct = steps.solve(shift, gradient)
+    steps, data, gradient, products, weights, shift, direct = damped_system_and_direct_step(graph, backend)
     trust = 1e-4
     loops = np.flatnonzero(graph.is_loop_closure)
     margin = PATTERN_MARGIN * trust
@@ -142,12 +147,7 @@ def test_a_growing_trusted_set_reuses_the_analysis_that_contains_it(corrupted, b
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_given_trusted_set_is_analysed_once_across_solves(corrupted, backend):
     graph = corrupted.graph
-    problem = Problem.from_graph(graph, backend)
-    data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
-    steps = problem.step_solver
-    shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
-    steps.set_system(data, products, weights, "direct")
-    direct = steps.solve(shift, gradient)
+    steps, data, gradient, products, weights, shift, direct = damped_system_and_direct_step(graph, backend)
     # The online solver's set: every edge but a few loops of full weight (new loops), which CG takes.
     given = np.ones(graph.num_edges, dtype=bool)
     given[np.flatnonzero(graph.is_loop_closure)[:5]] = False
