@@ -5,9 +5,11 @@
         [--large] [--grid 100000,...] [--importtime]
 
 Each row runs in two child processes, so that each solve's peak resident memory is its own: the
-first reads the file (or generates the grid), solves its least squares once untimed (the
-reference and a warm-up), then times the clean least-squares solve (`egnc.solve(graph, "l2")`):
-its peak is `clean MiB`. The second adds riSAM-protocol false loops drawn against that reference
+first reads the file (or generates the grid), solves its least squares untimed from the file's
+guess and from the chordal initialization (the reference is the lower minimum,
+`egnc.bench.cases.least_squares_optimum`; also the warm-up), then times the clean least-squares
+solve from that start (`egnc.solve(graph, "l2", init=...)`, its start in `clean init`): its
+peak is `clean MiB`. The second adds riSAM-protocol false loops drawn against that reference
 and times the default robust solve (`egnc.solve(corrupted, "egnc")`): its peak is `peak MiB`.
 Iterations are per solved stage (the last one is the least-squares refinement); `CG` is the
 conjugate-gradient iterations of all steps; `analyses` counts the linear solvers created for a
@@ -61,14 +63,15 @@ def run_clean(case: dict) -> dict:
     import numpy as np
 
     from egnc.api import solve
+    from egnc.bench.cases import least_squares_optimum
 
     backend = case["backend"]
     graph = _graph(case)
-    reference = solve(graph, "l2", linear_solver=backend)
+    reference = least_squares_optimum(graph, backend)
     np.save(case["reference"], reference.graph.poses)
     started = time.perf_counter()
-    clean = solve(graph, "l2", linear_solver=backend)
-    return {"clean_s": time.perf_counter() - started, "clean_iterations": clean.iterations}
+    clean = solve(graph, "l2", init=reference.init, linear_solver=backend)
+    return {"clean_s": time.perf_counter() - started, "clean_iterations": clean.iterations, "clean_init": clean.init}
 
 
 def run_robust(case: dict) -> dict:
@@ -214,21 +217,22 @@ def main() -> None:
     ]
     print(f"{time.strftime('%Y-%m-%d')}; {versions()}\n")
     header = (
-        "| dataset | false % | seed | backend | clean l2 (s) | robust (s) | ratio | iterations | CG | analyses |"
-        " rounds | rejected / false | P | R | ATE (m) | clean MiB | peak MiB | peak / clean |"
+        "| dataset | false % | seed | backend | clean init | clean l2 (s) | robust (s) | ratio | iterations | CG |"
+        " analyses | rounds | rejected / false | P | R | ATE (m) | clean MiB | peak MiB | peak / clean |"
     )
     extra = (" direct (s) | same as direct |" if args.direct else "") + (
         " before (s) | same as before |" if args.before else ""
     )
     print(header + extra)
     print(
-        "|---|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "|---|---:|---:|---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
         + "---:|---|" * extra.count("same")
     )
     for case in cases:
         f = run_child(case | {"direct": args.direct, "before": args.before})
         row = (
-            f"| {case['dataset']} | {case['percent']:g} | {case['seed']} | {case['backend']} | {f['clean_s']:.3f}"
+            f"| {case['dataset']} | {case['percent']:g} | {case['seed']} | {case['backend']} | {f['clean_init']}"
+            f" | {f['clean_s']:.3f}"
             f" | {f['robust_s']:.3f} | {f['robust_s'] / f['clean_s']:.1f} | {'+'.join(map(str, f['iterations']))}"
             f" | {f['cg']} | {f['analyses']} | {f['rounds']} | {f['rejected']} / {f['false']} | {f['precision']:.4f}"
             f" | {f['recall']:.4f} | {f['ate']:.2e} | {f['clean_mib']:.0f} | {f['peak_mib']:.0f}"

@@ -50,6 +50,7 @@ VALID: dict[str, tuple[object, ...]] = {
     "readmit_quantile": (0.9, 0.9999),
     "warm_start": (True, False),
     "chordal_start": (True, False),
+    "elimination_start": (True, False),
     "every_stage": (True, False),
     "stage_rel_cost_tol": (0.0, 1e-6, 1e-3),
 }
@@ -75,6 +76,7 @@ INVALID: dict[str, tuple[object, ...]] = {
     "readmit_quantile": (0.0, 1.0, *_NUMBER),
     "warm_start": ("no", 0, None),
     "chordal_start": ("yes", 1, None),
+    "elimination_start": ("no", 0.0),
     "every_stage": (1.0, "True"),
     "stage_rel_cost_tol": (-1e-6, *_NUMBER),
 }

@@ -14,6 +14,7 @@ from egnc.checks import check_callable, check_choice, check_instance
 from egnc.chordal import chordal_initialization
 from egnc.decision import decide_outliers, truncated_cost
 from egnc.diagnostics import solve_warnings
+from egnc.elimination import elimination_decision
 from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
@@ -46,6 +47,9 @@ __all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_cova
 
 INITIALIZATIONS = ("file", "odometry", "chordal")
 """Initial guesses `egnc.solve(init=...)` and `egnc-solve --init` accept (see `initial_guess`)."""
+
+_START_NAMES = {"chordal": "chordal initialization", "elimination": "backward elimination over every edge"}
+"""How the message names a start other than the guess whose decision was kept."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +91,9 @@ class Result:
         init: the initial guess used (`INITIALIZATIONS`).
         start: where the decision that was kept started: `"guess"` (the GNC solve from `init`),
             `"chordal"` (the chordal initialization, kept for its lower truncated cost;
-            `GncOptions.chordal_start`) or `"online"` (`egnc.online.OnlineSolver`'s estimate).
+            `GncOptions.chordal_start`), `"elimination"` (backward elimination from least squares
+            over every edge; `GncOptions.elimination_start`) or `"online"`
+            (`egnc.online.OnlineSolver`'s estimate).
         warnings: one sentence per thing the user should check before trusting the result
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
         settled: whether the kept decision's rounds reached a classification that no longer
@@ -198,10 +204,10 @@ def decided_fields(
         initial_r, r: `(E,)` whitened residual norms at the initial guess and at `result_poses`.
         inliers: `(E,)` bool, the accepted edges.
         robust: `(E,)` bool, the loop closures.
-        stages: every stage run (both starts' included).
+        stages: every stage run (every start's included).
         gnc_options: the outlier test's options.
         start, settled, disputed: the kept decision's start, whether it settled, and the loops the
-            other decision accepted where it rejects (None when only one start decided).
+            other starts' decisions accepted where it rejects (None when only one start decided).
     """
     d = graph.tangent_dim
     initial_fits = classify_inliers(initial_r, robust, d, gnc_options)
@@ -338,6 +344,7 @@ def solve(
     if decide:
         decision = decide_outliers(graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration)
         stages += decision.reports
+        candidates = {"guess": decision}
         if gnc_options.chordal_start:
             trusted = ~robust | (outcome.weights >= options.trust_weight)
             other, reports = chordal_decision(
@@ -345,13 +352,25 @@ def solve(
             )
             stages += reports
             if other is not None:
-                if other.truncated_cost < decision.truncated_cost:
-                    message_note = (
-                        f"; decision from the chordal initialization (truncated cost {other.truncated_cost:.6g},"
-                        f" against {decision.truncated_cost:.6g} from the initial guess)"
-                    )
-                    decision, other, start = other, decision, "chordal"
-                disputed = robust & ~decision.inliers & other.inliers
+                candidates["chordal"] = other
+        if gnc_options.elimination_start:
+            best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
+            other, reports = elimination_decision(
+                graph, robust, factors, best, options, gnc_options, backend, on_stage, on_iteration
+            )
+            stages += reports
+            if other is not None:
+                candidates["elimination"] = other
+        start = min(candidates, key=lambda name: candidates[name].truncated_cost)  # the guess wins ties
+        decision = candidates[start]
+        if start != "guess":
+            message_note = (
+                f"; decision from the {_START_NAMES[start]} (truncated cost {decision.truncated_cost:.6g},"
+                f" against {candidates['guess'].truncated_cost:.6g} from the initial guess)"
+            )
+        if len(candidates) > 1:
+            accepted_elsewhere = np.logical_or.reduce([c.inliers for name, c in candidates.items() if name != start])
+            disputed = robust & ~decision.inliers & accepted_elsewhere
         poses, inliers, settled = decision.poses, decision.inliers, decision.settled
         if decision.reports:
             status, message = decision.reports[-1].status, STATUS_MESSAGES[decision.reports[-1].status]

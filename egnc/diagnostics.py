@@ -51,8 +51,8 @@ def solve_warnings(
         start: the start whose decision was kept (only its stages count: `egnc.gnc.iteration_limited`).
         settled: whether the outlier decision reached a classification its own map confirms
             (`egnc.decision.Decision.settled`).
-        disputed: `(E,)` bool, loops the kept decision rejects and the other start's decision
-            accepted (`egnc.starts`); None when only one start decided.
+        disputed: `(E,)` bool, loops the kept decision rejects and another start's decision
+            accepted (`egnc.starts`, `egnc.elimination`); None when only one start decided.
     """
     warnings = [
         f"stage {k} stopped at its iteration limit ({stages[k - 1].iterations} iterations): the result may not"
@@ -68,7 +68,7 @@ def solve_warnings(
     if disputed is not None and disputed.any():
         ids = np.flatnonzero(disputed)
         warnings.append(
-            f"{len(ids)} rejected loop closures (edges {_listed(ids)}) were accepted by the decision from the other"
+            f"{len(ids)} rejected loop closures (edges {_listed(ids)}) were accepted by the decision from another"
             " start, whose truncated cost is higher: two explanations of this graph disagree on them; check them,"
             " and the known inliers and the initial guess"
         )

@@ -81,6 +81,11 @@ class GncOptions:
             (which does not read the initial guess) and keep the decision of lower truncated
             least-squares cost (`egnc.starts`): from a drifted guess the GNC stage can settle in a
             wrong basin that the decision rounds confirm.
+        elimination_start: with `refine`, decide once more by backward elimination from least
+            squares over every edge (`egnc.elimination`) where that is cheap (few loop closures),
+            and keep it if its truncated cost is lower: on a weakly constrained map least squares
+            fits false loops that the other starts' robust stage keeps out, at the price of
+            honest loops the map cannot vouch for.
         every_stage: solve every stage of the schedule even when, under restarts, only the last
             one decides the result: to watch the graduation stage by stage (same result, more time).
         stage_rel_cost_tol: graduated methods: each GNC stage stops when its relative cost
@@ -102,6 +107,7 @@ class GncOptions:
     readmit_quantile: float = 0.9999
     warm_start: bool = False
     chordal_start: bool = True
+    elimination_start: bool = True
     every_stage: bool = False
     stage_rel_cost_tol: float = 1e-6
 
@@ -117,14 +123,14 @@ class GncOptions:
         for name in ("outlier_quantile", "readmit_quantile"):
             value = getattr(self, name)
             checked[name] = check_float(f"GncOptions.{name}", value, 0.0, 1.0, open_low=True, open_high=True)
-        for name in ("refine", "readmit", "warm_start", "chordal_start", "every_stage"):
+        for name in ("refine", "readmit", "warm_start", "chordal_start", "elimination_start", "every_stage"):
             checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
         for name, value in checked.items():
             object.__setattr__(self, name, value)
 
 
-StageKind = Literal["gnc", "decision", "probe"]
-StageStart = Literal["guess", "chordal", "online"]
+StageKind = Literal["gnc", "decision", "probe", "elimination"]
+StageStart = Literal["guess", "chordal", "elimination", "online"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,9 +147,11 @@ class StageReport:
         cg_iterations: conjugate-gradient iterations of the stage's steps (`egnc.step_solver`;
             0 when every step was solved directly).
         kind: `"gnc"` (a graduated stage), `"decision"` (a least-squares round of
-            `egnc.decision`) or `"probe"` (the few iterations `egnc.starts` gives the chordal
-            start; it stops at its iteration limit by design).
-        start: the start the stage belongs to: `"guess"`, `"chordal"` (`egnc.starts`) or
+            `egnc.decision`), `"probe"` (the few iterations `egnc.starts` gives the chordal
+            start; it stops at its iteration limit by design) or `"elimination"` (a least-squares
+            solve of `egnc.elimination`'s backward elimination).
+        start: the start the stage belongs to: `"guess"`, `"chordal"` (`egnc.starts`),
+            `"elimination"` (`egnc.elimination`) or
             `"online"` (the estimate of `egnc.online.OnlineSolver`); only the stages of the
             start that was kept (`Result.start`) shape the result.
     """

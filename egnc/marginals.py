@@ -94,14 +94,37 @@ def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> n
     Solved in groups of columns so that memory stays bounded for many poses.
     """
     rows = np.asarray(rows, dtype=np.int64)
-    d, n = problem.graph.tangent_dim, problem.pattern.size
-    out = np.zeros((len(rows), d, d))
-    if n == 0:
-        return out
-    covariance_solve = covariance_solver(problem, poses)
+    d = problem.graph.tangent_dim
+    if not problem.pattern.size:
+        return np.zeros((len(rows), d, d))
     B = _transposed_jacobians(problem, rows[:, None], np.broadcast_to(np.eye(d), (len(rows), 1, d, d)))
+    return _diagonal_blocks(B, covariance_solver(problem, poses), d)
+
+
+def relative_covariances(problem: Problem, poses: np.ndarray, loops: BetweenFactors) -> np.ndarray:
+    """`(K, d, d)` covariances `A H^-1 A^T` of the residuals of `loops` predicted by the map of `problem`.
+
+    `A` is a loop's residual Jacobian at `poses`; for a loop that is an edge of `problem` this is
+    the covariance of its fitted residual's prediction (its leverage is `Omega^(1/2) A H^-1 A^T
+    Omega^(1/2)`), for one that is not, the map's share of its innovation covariance.
+
+    Raises:
+        NotPositiveDefiniteError: `H` cannot be factorized (a degenerate solution).
+    """
+    d = loops.information.shape[-1]
+    if not problem.pattern.size or not len(loops.edges):
+        return np.zeros((len(loops.edges), d, d))
+    linearization = loops.linearize(poses)
+    blocks = np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
+    B = _transposed_jacobians(problem, loops.edges, blocks)
+    return _diagonal_blocks(B, covariance_solver(problem, poses), d)
+
+
+def _diagonal_blocks(B: sp.csc_matrix, covariance_solve: Callable[[np.ndarray], np.ndarray], d: int) -> np.ndarray:
+    """`(K, d, d)` the diagonal `d x d` blocks of `B^T H^-1 B`, symmetrized, for `B` `(n, K d)`."""
+    out = np.zeros((B.shape[1] // d, d, d))
     for columns, X in _solved_columns(B, covariance_solve, d):
-        # the diagonal d x d blocks of B^T H^-1 B over these columns (B is sparse: a cheap product)
+        # B is sparse: the product over these columns is cheap next to the solve
         count = (columns.stop - columns.start) // d
         blocks = (B[:, columns].T @ X).reshape(count, d, count, d)
         out[columns.start // d : columns.stop // d] = blocks[np.arange(count), :, np.arange(count), :]

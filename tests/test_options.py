@@ -52,6 +52,7 @@ BAD_GNC_OPTIONS = [
     ("warm_start", "no"),
     ("warm_start", 0),
     ("chordal_start", "no"),
+    ("elimination_start", 1),
     ("refine", None),
     ("readmit", "yes"),
     ("every_stage", 1.0),
