@@ -64,21 +64,22 @@ def deletion_statistics(problem: Problem, poses: np.ndarray, loops: BetweenFacto
     """`(K,)` innovation statistic of each of `loops` against the map of the other edges of `problem`.
 
     `loops` must be edges of `problem`, solved at `poses` `(N, n, n)`. A loop that the rest of the
-    graph does not constrain at all (a bridge: `Omega^-1 - C` singular) cannot be contradicted and
-    gets 0.
+    graph does not constrain at all (a bridge: leverage 1, `Omega^-1 - C` singular) cannot be
+    contradicted and gets 0.
 
     Raises:
         NotPositiveDefiniteError: the information of `problem` cannot be factorized.
     """
-    e = loops.residuals(poses)
-    own = np.linalg.inv(loops.information)
-    deleted = own - relative_covariances(problem, poses, loops)  # covariance of e without the loop's pull
-    deleted = 0.5 * (deleted + np.swapaxes(deleted, 1, 2))
-    scale = np.trace(own, axis1=1, axis2=2)
-    testable = np.linalg.eigvalsh(deleted)[:, 0] > 1e-9 * scale
-    statistics = np.zeros(len(e))
+    # In whitened coordinates (`Omega = W W^T`): `e_w = W^T e`, leverage `h = W^T C W`, and the
+    # statistic is `e_w^T (I - h)^-1 e_w`; a bridge has a leverage eigenvalue of 1.
+    W = np.linalg.cholesky(loops.information)
+    e_w = np.einsum("kji,kj->ki", W, loops.residuals(poses))
+    leverage = np.swapaxes(W, 1, 2) @ relative_covariances(problem, poses, loops) @ W
+    deleted = np.eye(e_w.shape[1]) - 0.5 * (leverage + np.swapaxes(leverage, 1, 2))
+    testable = np.linalg.eigvalsh(deleted)[:, 0] > 1e-9
+    statistics = np.zeros(len(e_w))
     statistics[testable] = np.einsum(
-        "ki,ki->k", e[testable], np.linalg.solve(deleted[testable], e[testable][:, :, None])[:, :, 0]
+        "ki,ki->k", e_w[testable], np.linalg.solve(deleted[testable], e_w[testable][:, :, None])[:, :, 0]
     )
     return statistics
 
