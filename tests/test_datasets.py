@@ -188,6 +188,24 @@ def test_false_loops_follow_the_protocol(world, variant, percent):
         assert np.all(distance <= 5.0)
 
 
+def test_the_distance_rule_keeps_only_errors_past_the_quantile_itself(world):
+    graph, reference = world.graph, world.ground_truth.copy()
+    # A shrunken map with one heading: many candidates' errors lie near the quantile.
+    reference[:, : graph.dim] *= 0.2
+    reference[:, graph.dim :] = 0.0
+    reference[:, -1] = 1.0 if graph.dim == 3 else 0.0
+    quantile = chi2.ppf(0.95, graph.tangent_dim)
+    squared_rule = add_false_loops(graph, 30, seed=3, reference_poses=reference)
+    distance_rule = add_false_loops(graph, 30, seed=3, reference_poses=reference, outlier_rule="distance")
+    squared = squared_errors_at(squared_rule.graph, reference)[squared_rule.is_outlier]
+    distance = squared_errors_at(distance_rule.graph, reference)[distance_rule.is_outlier]
+    assert distance_rule.is_outlier.sum() == squared_rule.is_outlier.sum()
+    assert np.all(np.sqrt(distance) > quantile) and np.all(squared > quantile)
+    assert np.any(np.sqrt(squared) <= quantile)  # the squared rule keeps some the distance rule refuses
+    with pytest.raises(EgncError, match="outlier_rule"):
+        add_false_loops(graph, 30, seed=3, reference_poses=reference, outlier_rule="r")  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize("variant", ["group", "mixed"])
 def test_false_loops_come_in_consecutive_groups(world, variant):
     corrupted = add_false_loops(

@@ -98,6 +98,7 @@ def corrupted_cases(
     percents: Sequence[float],
     seeds: Sequence[int],
     variant: str,
+    outlier_rule: str = "squared",
 ) -> Iterator[tuple[float, int, BenchCase | str]]:
     """`(percent, seed, case)` for every corruption of one clean graph, percent-major, lazily.
 
@@ -112,6 +113,7 @@ def corrupted_cases(
                     seed=seed,
                     reference_poses=reference,
                     variant=variant,  # type: ignore[arg-type]
+                    outlier_rule=outlier_rule,  # type: ignore[arg-type]
                 )
             except EgncError as error:
                 yield percent, seed, f"error: {error}"

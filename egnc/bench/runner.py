@@ -57,6 +57,7 @@ def run_grid(
     *,
     data_dir: str | os.PathLike = "../shared/datasets",
     variant: str = "random",
+    outlier_rule: str = "squared",
     time_limit_s: float = 300.0,
     linear_solver: str = "auto",
     progress: Progress | None = None,
@@ -73,6 +74,8 @@ def run_grid(
             GTSAM methods are skipped (with a progress note) when gtsam is not importable.
         data_dir: where dataset names are looked up.
         variant: false-loop variant of `add_false_loops` ("random", "group", "mixed", "close").
+        outlier_rule: which false-loop candidates count as outliers (`add_false_loops`):
+            "squared" (`r^2 > chi2.ppf(0.95, d)`) or "distance" (riSAM's, `r > chi2.ppf(0.95, d)`).
         time_limit_s: per-run limit in seconds.
         linear_solver: egnc's linear backend for every solve, reference included.
         progress: called with one line of text after every run (and for notes).
@@ -107,7 +110,9 @@ def run_grid(
                     yield from ((path, float(p), int(s), reference) for p in percents for s in seeds)
                 else:
                     graph = typing.cast(PoseGraph, graphs[path])
-                    corruptions = corrupted_cases(path.stem, graph, reference, percents, seeds, variant)
+                    corruptions = corrupted_cases(
+                        path.stem, graph, reference, percents, seeds, variant, outlier_rule
+                    )
                     yield from ((path, float(p), int(s), case) for p, s, case in corruptions)
 
         runs = (

@@ -29,7 +29,7 @@ from egnc.bench import (
     write_outputs,
 )
 from egnc.cli.arguments import int_at_least, positive_float
-from egnc.datasets import VARIANTS
+from egnc.datasets import OUTLIER_RULES, VARIANTS
 from egnc.errors import EgncError
 from egnc.linear_solvers import LINEAR_SOLVERS
 
@@ -84,6 +84,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--methods", default="egnc,risam,gnc-gm,gnc-tls,l2", help="comma-separated method specs (see below)"
     )
     parser.add_argument("--variant", choices=VARIANTS, default="random", help="false-loop variant (default random)")
+    parser.add_argument(
+        "--outlier-rule",
+        choices=OUTLIER_RULES,
+        default="squared",
+        help="a candidate false loop counts when r^2 (default) or, as riSAM's generator, r exceeds chi2.ppf(0.95, d)",
+    )
     parser.add_argument(
         "--time-limit", type=positive_float, default=300.0, help="seconds per run before it is killed (default 300)"
     )
@@ -193,6 +199,7 @@ def main(argv: list[str] | None = None) -> int:
                 methods,
                 data_dir=args.data_dir,
                 variant=args.variant,
+                outlier_rule=args.outlier_rule,
                 time_limit_s=args.time_limit,
                 linear_solver=args.linear_solver,
                 progress=progress,

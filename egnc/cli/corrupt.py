@@ -17,7 +17,7 @@ from pathlib import Path
 
 from egnc import __version__
 from egnc.api import solve
-from egnc.datasets import VARIANTS, add_false_loops, write_labels
+from egnc.datasets import OUTLIER_RULES, VARIANTS, add_false_loops, write_labels
 from egnc.errors import EgncError
 from egnc.io import read_g2o, write_g2o
 from egnc.linear_solvers import LINEAR_SOLVERS
@@ -56,6 +56,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=10.0,
         help="--variant close: maximum distance in metres between the endpoints (default 10)",
+    )
+    parser.add_argument(
+        "--outlier-rule",
+        choices=OUTLIER_RULES,
+        default="squared",
+        help="a candidate false loop counts when r^2 (default) or, as riSAM's generator, r exceeds chi2.ppf(0.95, d)",
     )
     parser.add_argument("-o", "--output", type=Path, required=True, help="corrupted pose graph to write (.g2o)")
     parser.add_argument(
@@ -96,6 +102,7 @@ def main(argv: list[str] | None = None) -> int:
             variant=args.variant,
             group_size=args.group_size,
             close_radius=args.close_radius,
+            outlier_rule=args.outlier_rule,
         )
         write_g2o(corrupted.graph, args.output)
         written.append(args.output)
@@ -106,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
             "percent": args.percent,
             "variant": args.variant,
             "seed": args.seed,
+            "outlier_rule": args.outlier_rule,
         }
         if args.variant in ("group", "mixed"):
             meta["group_size"] = args.group_size

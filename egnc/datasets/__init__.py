@@ -1,6 +1,7 @@
 """Synthetic benchmark data: grid-world pose graphs, false loop closures, noisy-Manhattan datasets and label files."""
 
 from egnc.datasets.false_loops import (
+    OUTLIER_RULES,
     VARIANTS,
     CorruptedGraph,
     add_false_loops,
@@ -11,6 +12,7 @@ from egnc.datasets.labels import read_labels, write_labels
 from egnc.datasets.noisy_manhattan import NoisyGraph, make_noisy_manhattan
 
 __all__ = [
+    "OUTLIER_RULES",
     "VARIANTS",
     "CorruptedGraph",
     "GridWorld",

@@ -7,8 +7,9 @@ the identity, and has the fixed covariance `diag(0.015, 0.01, 0.001)` in 2D or `
 A candidate is kept only if it really is an outlier: its squared whitened error at the
 outlier-free optimum `reference_poses` exceeds `chi2.ppf(0.95, d)`, the EGNC paper's outlier rule
 (DESIGN.md section 4; egnc's own decision after a solve uses the higher threshold
-`chi2.ppf(GncOptions.outlier_quantile, d)`, 0.99 by default). riSAM's generator compares the unsquared distance
-with its quantile instead, which only keeps larger errors.
+`chi2.ppf(GncOptions.outlier_quantile, d)`, 0.99 by default). riSAM's generator compares the
+unsquared distance with that quantile instead, which only keeps larger errors
+(`outlier_rule="distance"`).
 A candidate is also redrawn when its two poses already share an edge, of the graph or an earlier
 false loop (in either direction): the corrupted graph has no duplicate edge
 (`PoseGraph.is_duplicate`) that the input did not have, so a reader warns about nothing new.
@@ -48,6 +49,10 @@ from egnc.kernels import chi2_quantile
 Variant = Literal["random", "group", "mixed", "close"]
 VARIANTS: tuple[str, ...] = ("random", "group", "mixed", "close")
 """Names accepted by `add_false_loops(variant=...)`."""
+
+OutlierRule = Literal["squared", "distance"]
+OUTLIER_RULES: tuple[str, ...] = ("squared", "distance")
+"""Names accepted by `add_false_loops(outlier_rule=...)`."""
 
 FALSE_LOOP_COVARIANCE = {2: (0.015, 0.01, 0.001), 3: (0.01,) * 6}
 """Diagonal covariance of every false loop closure by dimension (riSAM's protocol), `[v, omega]`."""
@@ -92,6 +97,7 @@ def add_false_loops(
     variant: Variant = "random",
     group_size: int = 5,
     close_radius: float = 10.0,
+    outlier_rule: OutlierRule = "squared",
 ) -> CorruptedGraph:
     """Add seeded false loop closures to `graph` (riSAM's protocol, see the module docstring).
 
@@ -106,6 +112,9 @@ def add_false_loops(
             short to reach the exact count).
         close_radius: "close" only: maximum distance in metres between the endpoints' reference
             positions.
+        outlier_rule: a candidate is an outlier when its whitened error at `reference_poses`
+            exceeds `q = chi2.ppf(0.95, d)`: its square `r^2 > q` ("squared", the EGNC paper's
+            rule) or the error itself, `r > q` ("distance", riSAM's generator).
 
     Returns:
         The `CorruptedGraph`.
@@ -120,6 +129,10 @@ def add_false_loops(
         raise EgncError(f"add_false_loops: unknown variant {variant!r}: choose one of {', '.join(VARIANTS)}")
     if group_size < 1:
         raise EgncError(f"add_false_loops: group_size must be at least 1, got {group_size}")
+    if outlier_rule not in OUTLIER_RULES:
+        raise EgncError(
+            f"add_false_loops: unknown outlier_rule {outlier_rule!r}: choose one of {', '.join(OUTLIER_RULES)}"
+        )
     if not close_radius > 0.0:
         raise EgncError(f"add_false_loops: close_radius must be positive, got {close_radius}")
     reference_poses = np.asarray(reference_poses, dtype=np.float64)
@@ -148,6 +161,7 @@ def add_false_loops(
         forward=bool(2 * np.count_nonzero(loops[:, 0] < loops[:, 1]) >= len(loops)),
         close_radius=close_radius if variant == "close" else None,
         edges=graph.edges,
+        distance_rule=outlier_rule == "distance",
     )
     false_edges = np.concatenate([sampler.draw(n, size) for n, size in segments])
     return _merge(graph, false_edges)
@@ -164,6 +178,7 @@ class _Sampler:
         forward: bool,
         close_radius: float | None,
         edges: np.ndarray,
+        distance_rule: bool,
     ):
         self.rng = rng
         self.T_world = T_world
@@ -171,7 +186,9 @@ class _Sampler:
         self.forward = forward
         self.close_radius = close_radius
         self.information_diagonal = np.diag(_false_loop_information(dim))
-        self.threshold = chi2_quantile(ACCEPT_QUANTILE, TANGENT_SIZE[dim])
+        quantile = chi2_quantile(ACCEPT_QUANTILE, TANGENT_SIZE[dim])
+        self.threshold = quantile**2 if distance_rule else quantile
+        """Bound on the squared whitened error (`r > q` is `r^2 > q^2`)."""
         self.taken = {(min(a, b), max(a, b)) for a, b in edges.tolist()}
         """Unordered pose pairs that already have an edge: the graph's and the false loops kept so far."""
 
