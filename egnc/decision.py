@@ -189,9 +189,18 @@ def _batch_innovations(
     e, S = innovations(problem, poses, loops, covariance_solve)
     d = e.shape[1]
     block = np.arange(len(e))[:, None] * d + np.arange(d)
-    own = np.linalg.inv(loops.information)
-    relative = S[block[:, :, None], block[:, None, :]] - own
-    return e, S, np.trace(relative, axis1=1, axis2=2) <= np.trace(own, axis1=1, axis2=2)
+    relative = S[block[:, :, None], block[:, None, :]] - np.linalg.inv(loops.information)
+    return e, S, well_determined(relative, loops.information)
+
+
+def well_determined(relative: np.ndarray, information: np.ndarray) -> np.ndarray:
+    """`(K,)` bool: the map's covariance `(K, d, d)` of each loop's relative pose is no larger than the loop's own.
+
+    In total variance, `trace(Sigma_rel) <= trace(Omega^-1)` (`_batch_innovations` says why),
+    for loops of information `(K, d, d)`.
+    """
+    own = np.trace(np.linalg.inv(information), axis1=1, axis2=2)
+    return np.trace(relative, axis1=1, axis2=2) <= own
 
 
 def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> np.ndarray:

@@ -26,11 +26,18 @@ From the chordal initialization of every edge (`egnc.chordal`), the start:
 
 The caller keeps the result only where its truncated cost is lower than the other starts'.
 
-Each step costs a least-squares solve and `2 d` covariance columns per accepted loop, so the
-start runs only where its worst case is small: every rejected loop adds `chi2.ppf(q, d) / 2` to
-the truncated cost, so past `2 c / chi2.ppf(q, d)` steps it cannot beat a decision of truncated
-cost `c`, and that bound times the number of loop closures must stay within `STEP_BUDGET`. On
-graphs with many loops their residuals show false loops directly, and the other starts decide.
+The start runs only where it can change something and its worst case is small:
+
+- the best decision so far rejected a loop that re-admission could neither take nor refute
+  (`undecided`): it agrees with the map only within the map's own large uncertainty of its
+  relative pose. MIT's 13 wrongly rejected loops are all of this kind; a stiff map's false
+  loops are refuted outright (csail, kitti_00, intel, smallGrid3D with 10-30 % false loops:
+  none undecided).
+- each step costs a least-squares solve and `2 d` covariance columns per accepted loop. Every
+  rejected loop adds `chi2.ppf(q, d) / 2` to the truncated cost, so past `2 c / chi2.ppf(q, d)`
+  steps it cannot beat a decision of truncated cost `c`; that bound times the number of loop
+  closures must stay within `STEP_BUDGET`. Graphs with many loops are stiff enough that false
+  loops show in their residuals, and the other starts decide.
 
 References:
     R. D. Cook, "Detection of influential observation in linear regression", Technometrics 1977.
@@ -45,7 +52,7 @@ import time
 import numpy as np
 
 from egnc.chordal import chordal_initialization
-from egnc.decision import Decision, decide_outliers
+from egnc.decision import Decision, decide_outliers, well_determined
 from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions, StageCallback, StageReport
@@ -84,6 +91,38 @@ def deletion_statistics(problem: Problem, poses: np.ndarray, loops: BetweenFacto
     return statistics
 
 
+def undecided(
+    graph: PoseGraph,
+    robust: np.ndarray,
+    factors: BetweenFactors,
+    decision: Decision,
+    gnc_options: GncOptions,
+    linear_solver: str,
+) -> np.ndarray:
+    """`(R,)` bool for the loops `decision` rejected (edge order): re-admission could neither take nor refute it.
+
+    Such a loop agrees with the decision's map (innovation statistic at most
+    `chi2.ppf(readmit_quantile, d)`) only because the map does not determine its relative pose
+    (`egnc.decision.well_determined` is false): the map is too weak to judge it.
+    """
+    rejected = np.flatnonzero(robust & ~decision.inliers)
+    if not len(rejected):
+        return np.zeros(0, dtype=bool)
+    loops = factors.subset(rejected)
+    try:
+        problem = Problem.from_graph(
+            graph.subgraph_edges(decision.inliers), linear_solver, factors.subset(decision.inliers)
+        )
+        relative = relative_covariances(problem, decision.poses, loops)
+    except NotPositiveDefiniteError:  # no covariance at a degenerate solution: nothing to judge by
+        return np.zeros(len(rejected), dtype=bool)
+    e = loops.residuals(decision.poses)
+    S = relative + np.linalg.inv(loops.information)
+    statistics = np.einsum("ki,ki->k", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])
+    agree = statistics <= chi2_quantile(gnc_options.readmit_quantile, graph.tangent_dim)
+    return agree & ~well_determined(relative, loops.information)
+
+
 def elimination_decision(
     graph: PoseGraph,
     robust: np.ndarray,
@@ -109,13 +148,16 @@ def elimination_decision(
 
     Returns:
         `(decision, reports)`: the decision, or None where the start did not run or stopped
-        early (over budget, no chordal map, a failed solve, past the step bound), and the
+        early (nothing undecided, over budget, no chordal map, a failed solve, past the step
+        bound), and the
         reports of every solve run here.
     """
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
     threshold = chi2_quantile(q, d)
     max_steps = int(2.0 * to_beat.truncated_cost / threshold)
     if int(np.count_nonzero(robust)) * max(max_steps, 1) > STEP_BUDGET:
+        return None, ()
+    if not undecided(graph, robust, factors, to_beat, gnc_options, linear_solver).any():
         return None, ()
     try:
         poses = to_matrices(graph.dim, chordal_initialization(graph, linear_solver=linear_solver))
