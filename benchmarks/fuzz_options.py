@@ -51,6 +51,7 @@ VALID: dict[str, tuple[object, ...]] = {
     "warm_start": (True, False),
     "chordal_start": (True, False),
     "elimination_start": (True, False),
+    "regroup_start": (True, False),
     "every_stage": (True, False),
     "stage_rel_cost_tol": (0.0, 1e-6, 1e-3),
 }
@@ -77,6 +78,7 @@ INVALID: dict[str, tuple[object, ...]] = {
     "warm_start": ("no", 0, None),
     "chordal_start": ("yes", 1, None),
     "elimination_start": ("no", 0.0),
+    "regroup_start": (1, "off"),
     "every_stage": (1.0, "True"),
     "stage_rel_cost_tol": (-1e-6, *_NUMBER),
 }

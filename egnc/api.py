@@ -40,6 +40,7 @@ from egnc.least_squares import (
 )
 from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
+from egnc.regroup import regrouped_decision
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 from egnc.starts import chordal_decision
 
@@ -48,7 +49,11 @@ __all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_cova
 INITIALIZATIONS = ("file", "odometry", "chordal")
 """Initial guesses `egnc.solve(init=...)` and `egnc-solve --init` accept (see `initial_guess`)."""
 
-_START_NAMES = {"chordal": "chordal initialization", "elimination": "backward elimination over every edge"}
+_START_NAMES = {
+    "chordal": "chordal initialization",
+    "regrouped": "rejected runs of loop closures put back together",
+    "elimination": "backward elimination over every edge",
+}
 """How the message names a start other than the guess whose decision was kept."""
 
 
@@ -91,7 +96,8 @@ class Result:
         init: the initial guess used (`INITIALIZATIONS`).
         start: where the decision that was kept started: `"guess"` (the GNC solve from `init`),
             `"chordal"` (the chordal initialization, kept for its lower truncated cost;
-            `GncOptions.chordal_start`), `"elimination"` (backward elimination from least squares
+            `GncOptions.chordal_start`), `"regrouped"` (rejected runs of loops put back together;
+            `GncOptions.regroup_start`), `"elimination"` (backward elimination from least squares
             over every edge; `GncOptions.elimination_start`) or `"online"`
             (`egnc.online.OnlineSolver`'s estimate).
         warnings: one sentence per thing the user should check before trusting the result
@@ -353,6 +359,14 @@ def solve(
             stages += reports
             if other is not None:
                 candidates["chordal"] = other
+        if gnc_options.regroup_start:
+            best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
+            other, reports = regrouped_decision(
+                graph, robust, factors, best, options, gnc_options, backend, on_stage, on_iteration
+            )
+            stages += reports
+            if other is not None:
+                candidates["regrouped"] = other
         if gnc_options.elimination_start:
             best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
             other, reports = elimination_decision(
@@ -361,7 +375,10 @@ def solve(
             stages += reports
             if other is not None:
                 candidates["elimination"] = other
-        start = min(candidates, key=lambda name: candidates[name].truncated_cost)  # the guess wins ties
+        start = "guess"
+        for name, candidate in candidates.items():  # a later start must be lower by more than rounding
+            if candidate.truncated_cost < candidates[start].truncated_cost * (1 - 1e-9):
+                start = name
         decision = candidates[start]
         if start != "guess":
             message_note = (

@@ -81,6 +81,10 @@ class GncOptions:
             (which does not read the initial guess) and keep the decision of lower truncated
             least-squares cost (`egnc.starts`): from a drifted guess the GNC stage can settle in a
             wrong basin that the decision rounds confirm.
+        regroup_start: with `refine`, decide once more with the rejected loops that come in runs
+            (both ends within a few poses of each other's) put back together, from the chordal
+            initialization over them and the accepted edges (`egnc.regroup`), where such runs
+            exist, and keep it if its truncated cost is lower.
         elimination_start: with `refine`, decide once more by backward elimination from least
             squares over every edge (`egnc.elimination`) where that is cheap (few loop closures),
             and keep it if its truncated cost is lower: on a weakly constrained map least squares
@@ -107,6 +111,7 @@ class GncOptions:
     readmit_quantile: float = 0.9999
     warm_start: bool = False
     chordal_start: bool = True
+    regroup_start: bool = True
     elimination_start: bool = True
     every_stage: bool = False
     stage_rel_cost_tol: float = 1e-6
@@ -123,14 +128,15 @@ class GncOptions:
         for name in ("outlier_quantile", "readmit_quantile"):
             value = getattr(self, name)
             checked[name] = check_float(f"GncOptions.{name}", value, 0.0, 1.0, open_low=True, open_high=True)
-        for name in ("refine", "readmit", "warm_start", "chordal_start", "elimination_start", "every_stage"):
+        starts = ("chordal_start", "regroup_start", "elimination_start")
+        for name in ("refine", "readmit", "warm_start", *starts, "every_stage"):
             checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
         for name, value in checked.items():
             object.__setattr__(self, name, value)
 
 
 StageKind = Literal["gnc", "decision", "probe", "elimination"]
-StageStart = Literal["guess", "chordal", "elimination", "online"]
+StageStart = Literal["guess", "chordal", "regrouped", "elimination", "online"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,7 +157,7 @@ class StageReport:
             start; it stops at its iteration limit by design) or `"elimination"` (a least-squares
             solve of `egnc.elimination`'s backward elimination).
         start: the start the stage belongs to: `"guess"`, `"chordal"` (`egnc.starts`),
-            `"elimination"` (`egnc.elimination`) or
+            `"regrouped"` (`egnc.regroup`), `"elimination"` (`egnc.elimination`) or
             `"online"` (the estimate of `egnc.online.OnlineSolver`); only the stages of the
             start that was kept (`Result.start`) shape the result.
     """

@@ -23,6 +23,9 @@ from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
 from egnc.marginals import innovations, pose_covariances
 
+GUESS_ONLY = GncOptions(chordal_start=False, regroup_start=False, elimination_start=False)
+"""The decision from the initial guess alone."""
+
 OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, chordal_start=False, elimination_start=False)
 """The decision before re-admission and the other starts: the Geman-McClure classification at
 chi2.ppf(0.95), re-checked by r^2."""
@@ -65,7 +68,7 @@ def test_false_loops_stay_rejected_after_readmission():
 def test_a_stage_at_its_iteration_limit_is_a_warning_not_converged():
     graph = grid_world(2, 300, seed=2, odometry_sigma=(0.05, 0.02)).graph
     # (from the guess alone: here the chordal start converges within the limit and is kept)
-    result = solve(graph, options=SolverOptions(max_iterations=2), gnc_options=GncOptions(chordal_start=False))
+    result = solve(graph, options=SolverOptions(max_iterations=2), gnc_options=GUESS_ONLY)
     assert not result.converged
     assert any("iteration limit" in warning for warning in result.warnings)
     # no stage is run twice: at most the three EGNC stages and the decision rounds
@@ -178,7 +181,7 @@ def test_a_corrupted_odometry_edge_is_reported_not_hidden():
     k = np.flatnonzero(graph.is_odometry)[40]
     measurements[k, 0] += 1000.0  # a wheel-odometry glitch of a kilometre
     corrupted = dataclasses.replace(graph, measurements=measurements)
-    result = solve(corrupted, gnc_options=GncOptions(chordal_start=False))
+    result = solve(corrupted, gnc_options=GUESS_ONLY)
     assert any("known-inlier edges (odometry) disagree" in warning for warning in result.warnings)
     assert len(result.stages) <= 3 + MAX_ROUNDS
     # From the chordal start the odometry is honoured, kilometre and all, and the loops across
@@ -222,7 +225,7 @@ def test_decision_rounds_reach_a_fixed_point_where_they_used_to_alternate():
     graph = grid_world(2, 2000, seed=2).graph
     clean = solve(graph, "l2")
     corrupted = add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
-    result = solve(corrupted.graph, gnc_options=GncOptions(chordal_start=False))
+    result = solve(corrupted.graph, gnc_options=GUESS_ONLY)
     rounds = [stage for stage in result.stages if stage.kind == "decision"]
     assert len(rounds) < MAX_ROUNDS
     assert result.warnings == ()

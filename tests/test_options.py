@@ -53,6 +53,7 @@ BAD_GNC_OPTIONS = [
     ("warm_start", 0),
     ("chordal_start", "no"),
     ("elimination_start", 1),
+    ("regroup_start", "on"),
     ("refine", None),
     ("readmit", "yes"),
     ("every_stage", 1.0),

@@ -21,7 +21,7 @@ from egnc.kernels import chi2_quantile
 from egnc.least_squares import Problem
 from egnc.marginals import pose_covariances
 
-GUESS_ONLY = GncOptions(chordal_start=False)
+GUESS_ONLY = GncOptions(chordal_start=False, regroup_start=False, elimination_start=False)
 """The default before the chordal start: decide from the GNC solve of the initial guess alone."""
 
 

@@ -63,7 +63,7 @@ class Progress(_ProgressLine):
         if stage.kind == "probe":
             mu = "chordal start, least squares probe"
         elif math.isnan(stage.mu_mean):
-            mu = "least squares" + (f" ({stage.start} start)" if stage.start in ("chordal", "elimination") else "")
+            mu = "least squares" + (f" ({stage.start} start)" if stage.start != "guess" else "")
         else:
             mu = f"mu {stage.mu_min:.3g}..{stage.mu_max:.3g}"
         limit = " (iteration limit)" if stage.status == 0 and stage.kind != "probe" else ""
