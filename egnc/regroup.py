@@ -8,7 +8,10 @@ tears there, both sides fit their own loops, and each loop of the run, tested al
 torn map, fails: no round of `egnc.decision` brings one back, since it would need the others
 (a 100 000-pose grid with 30 % false loops: 830 true loops rejected, 721 of them in runs).
 
-This start puts every run of at least `MIN_RUN` rejected loops back at once, solves the chordal
+Loops are linked into a run when both their ends are within `RUN_WINDOW` poses and they agree
+with each other through the map between their ends (`consistent_pairs`: a chi-square test of
+the cycle the two loops close, at `GncOptions.readmit_quantile`). This start puts every run of at
+least `MIN_RUN` rejected loops back at once, solves the chordal
 initialization (`egnc.chordal`) over the accepted edges and those runs, which closes the tear
 without reading the torn map, classifies every loop there and decides from that classification
 (`egnc.decision.decide_outliers`). The caller keeps the result only where its truncated cost is
@@ -29,9 +32,10 @@ from egnc.chordal import chordal_initialization
 from egnc.connectivity import connected_components
 from egnc.decision import Decision, decide_outliers
 from egnc.errors import SolverError
-from egnc.factors import BetweenFactors, to_matrices
+from egnc.factors import BetweenFactors, group_of, to_matrices
 from egnc.gnc import GncOptions, StageCallback, StageReport, classify_inliers
 from egnc.graph import PoseGraph
+from egnc.kernels import chi2_quantile
 from egnc.least_squares import IterationCallback, SolverOptions
 
 RUN_WINDOW = 10
@@ -42,10 +46,10 @@ MIN_RUN = 3
 form pairs by chance, 26 of them, and no run of three)."""
 
 
-def loop_runs(edges: np.ndarray, window: int = RUN_WINDOW) -> np.ndarray:
-    """`(K,)` int label of the run of each loop `(K, 2)` (pose rows): loops linked by ends at most `window` apart.
+def neighbouring_pairs(edges: np.ndarray, window: int = RUN_WINDOW) -> np.ndarray:
+    """`(P, 2)` index pairs of loops `(K, 2)` (pose rows) whose ends are both at most `window` poses apart.
 
-    Runs are the connected components of "both ends within `window` poses", orientation ignored.
+    Orientation is ignored: `(a, b)` and `(b', a')` are compared end to end.
     """
     ends = np.sort(np.asarray(edges, dtype=np.int64), axis=1)
     order = np.lexsort((ends[:, 1], ends[:, 0]))
@@ -57,8 +61,52 @@ def loop_runs(edges: np.ndarray, window: int = RUN_WINDOW) -> np.ndarray:
             break
         linked = np.flatnonzero(near & (np.abs(b[shift:] - b[:-shift]) <= window))
         links.append(np.stack([order[linked], order[linked + shift]], axis=1))
-    pairs = np.concatenate(links) if links else np.zeros((0, 2), dtype=np.int64)
-    return connected_components(len(ends), pairs)[1]
+    return np.concatenate(links) if links else np.zeros((0, 2), dtype=np.int64)
+
+
+def consistent_pairs(loops: BetweenFactors, poses: np.ndarray, pairs: np.ndarray, threshold: float) -> np.ndarray:
+    """`(P,)` bool: the two loops of each pair agree with each other through the map near their ends.
+
+    With both loops oriented from their lower pose row, `(i1, j1)` and `(i2, j2)`, the cycle
+    `Z1^-1 (X_i1^-1 X_i2) Z2 (X_j2^-1 X_j1)` is the identity when both measure the truth; it reads
+    the map only between poses a few rows apart, which a tear elsewhere leaves intact. Its log is
+    tested against `threshold` (a chi-square quantile) with the loops' covariances added (the
+    short stretches of map between the ends are taken as exact, and the covariances untransported).
+
+    Args:
+        loops: the `K` loop closures.
+        poses: `(N, n, n)` the map.
+        pairs: `(P, 2)` indices into `loops`.
+        threshold: chi-square quantile for `d` degrees of freedom.
+    """
+    group = group_of(loops.dim)
+    flip = loops.edges[:, 0] > loops.edges[:, 1]
+    i = np.where(flip, loops.edges[:, 1], loops.edges[:, 0])
+    j = np.where(flip, loops.edges[:, 0], loops.edges[:, 1])
+    Z_inv = np.where(flip[:, None, None], group.inverse(loops.Z_inv), loops.Z_inv)  # oriented i -> j
+    first, second = pairs[:, 0], pairs[:, 1]
+    cycle = (
+        Z_inv[first]
+        @ group.between(poses[i[first]], poses[i[second]])
+        @ group.inverse(Z_inv[second])
+        @ group.between(poses[j[second]], poses[j[first]])
+    )
+    e = group.log(cycle)
+    covariance = np.linalg.inv(loops.information[first]) + np.linalg.inv(loops.information[second])
+    statistics = np.einsum("pi,pi->p", e, np.linalg.solve(covariance, e[:, :, None])[:, :, 0])
+    return statistics <= threshold
+
+
+def loop_runs(loops: BetweenFactors, poses: np.ndarray, threshold: float, window: int = RUN_WINDOW) -> np.ndarray:
+    """`(K,)` int run label of each loop: components of neighbouring loops that agree with each other.
+
+    `neighbouring_pairs` proposes the links and `consistent_pairs` keeps those whose cycle through
+    the map `poses` passes `threshold`: random false loops that happen to lie side by side do not
+    agree (on parking-garage with 50 % false loops, 2674 of them fell into runs by position alone).
+    """
+    pairs = neighbouring_pairs(loops.edges, window)
+    pairs = pairs[consistent_pairs(loops, poses, pairs, threshold)] if len(pairs) else pairs
+    return connected_components(len(loops.edges), pairs)[1]
 
 
 def regrouped_decision(
@@ -89,7 +137,8 @@ def regrouped_decision(
         exists or the chordal system cannot be factorized, and the reports of its rounds.
     """
     rejected = np.flatnonzero(robust & ~to_beat.inliers)
-    labels = loop_runs(graph.edges[rejected])
+    threshold = chi2_quantile(gnc_options.readmit_quantile, graph.tangent_dim)
+    labels = loop_runs(factors.subset(rejected), to_beat.poses, threshold)
     in_run = np.bincount(labels, minlength=1)[labels] >= MIN_RUN
     if not in_run.any():
         return None, ()
