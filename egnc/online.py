@@ -468,7 +468,10 @@ class OnlineSolver:
 
     def _current_problem(self) -> Problem:
         if self._problem is None:
-            self._problem = Problem.from_graph(self._graph(), self.linear_solver, self._current_factors())
+            # Its whole system is solved by CG with the trusted preconditioner; only a fallback factorizes it.
+            self._problem = Problem.from_graph(
+                self._graph(), self.linear_solver, self._current_factors(), fill_reducing=False
+            )
         return self._problem
 
     def _graduating(self, new_loops: np.ndarray) -> np.ndarray:
