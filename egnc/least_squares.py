@@ -198,18 +198,26 @@ class Problem:
 
     @classmethod
     def from_graph(
-        cls, graph: PoseGraph, linear_solver: str = "auto", factors: BetweenFactors | None = None
+        cls,
+        graph: PoseGraph,
+        linear_solver: str = "auto",
+        factors: BetweenFactors | None = None,
+        fill_reducing: bool = True,
     ) -> Problem:
         """Prepare `graph` for solving; the gauge is fixed on pose 0 unless some poses are fixed.
 
         `factors`: the graph's factors if already built (`BetweenFactors.subset` of a larger graph's).
+        `fill_reducing`: False leaves the whole system in pose-row order, without computing a
+        fill-reducing order, for a problem solved once by CG with a given trusted set (the
+        online solver's): its direct solver then orders the system itself if a CG step falls back
+        to it.
         """
         backend = resolve_name(linear_solver)
         fixed = graph.fixed.copy()
         if not fixed.any():
             fixed[0] = True
         # Unknown blocks in a fill-reducing order of the free poses, computed once.
-        pattern, solver = analysed_pattern(graph.edges, fixed, graph.tangent_dim, backend)
+        pattern, solver = analysed_pattern(graph.edges, fixed, graph.tangent_dim, backend, fill_reducing)
         steps = StepSolver(graph.edges, fixed, graph.tangent_dim, backend, pattern, solver)
         return cls(graph, factors or BetweenFactors.from_graph(graph), pattern, solver, steps)
 

@@ -118,9 +118,13 @@ class NormalEquationsPattern:
         indices = np.empty(nnz, dtype=np.int64)
         indices[slot[stored]] = np.broadcast_to(block_row[:, None, None] * d + a, slot.shape)[stored]
 
-        # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes: row r and column c < 2d
-        # of P belong to the edge's poses r // d and c // d, components r % d and c % d.
-        block_of = np.full((len(var), 2, 2), -1, dtype=np.int64)  # stored block of (row pose, column pose)
+        # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes: the (d, d) sub-block of
+        # rows `row_side` and columns `col_side` of P is the stored block of (row pose, column
+        # pose), copied whole (its unstored scalars, or all of it when the block is not stored,
+        # go to the discard slot). Rows of the last column are the gradient of the row pose.
+        discard = nnz + size
+        block_slots = np.where(stored, slot, discard)  # (blocks, d, d)
+        slots = np.full((len(var), 2 * d, 2 * d + 1), discard, dtype=np.int64)
         for row_side in range(2):
             for col_side in range(2):
                 rv, cv = var[:, row_side], var[:, col_side]
@@ -128,16 +132,10 @@ class NormalEquationsPattern:
                 query = cv[kept] * stride + rv[kept]
                 found = np.searchsorted(block_keys, query)
                 assert np.array_equal(block_keys[found], query), "pattern misses a block"
-                block_of[kept, row_side, col_side] = found
-        sides = np.arange(2 * d) // d
-        component = np.arange(2 * d) % d
-        block = block_of[:, sides[:, None], sides[None, :]]  # (E, 2d, 2d)
-        flat = (np.maximum(block, 0) * d + component[:, None]) * d + component[None, :]
-        edge_stored = (block >= 0) & stored.reshape(-1)[flat]
-        row_var = var[:, sides]  # (E, 2d)
-        slots = np.empty((len(var), 2 * d, 2 * d + 1), dtype=np.int64)
-        slots[:, :, : 2 * d] = np.where(edge_stored, slot.reshape(-1)[flat], nnz + size)
-        slots[:, :, 2 * d] = np.where(row_var >= 0, nnz + row_var * d + component, nnz + size)
+                rows, cols = slice(row_side * d, (row_side + 1) * d), slice(col_side * d, (col_side + 1) * d)
+                slots[kept, rows, cols] = block_slots[found]
+        row_var = var[:, np.arange(2 * d) // d]  # (E, 2d)
+        slots[:, :, 2 * d] = np.where(row_var >= 0, nnz + row_var * d + np.arange(2 * d) % d, discard)
 
         diagonal = np.flatnonzero(block_col == block_row)  # one per free pose, in order
         diagonal_slots = slot[diagonal][:, np.arange(d), np.arange(d)].ravel()

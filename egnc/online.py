@@ -31,9 +31,10 @@ accepted loops, re-test, re-admission by innovation) on the current estimate.
 
 What an update costs follows what changed: new poses are placed by composing their odometry from
 the current estimate, so an update that only extends the trajectory leaves every residual
-at the optimum and solves nothing. An update with a loop closure re-analyses the grown system once
-(ordering and symbolic factorization, `egnc.least_squares.Problem`) and reuses it for all its
-stages.
+at the optimum and solves nothing. An update with a loop closure builds the grown system's
+normal-equations pattern once, in pose-row order (CG solves it; no fill-reducing order is
+computed), analyses the preconditioner of the edges the map trusts (ordering and symbolic
+factorization, `egnc.step_solver`), and reuses both for all its stages.
 
 Gauge: the pose of the first `add_prior` is held fixed at the prior's value (as `egnc.io.irl`
 does: the only absolute factor is satisfied exactly at the optimum, whatever its covariance);
@@ -468,7 +469,10 @@ class OnlineSolver:
 
     def _current_problem(self) -> Problem:
         if self._problem is None:
-            self._problem = Problem.from_graph(self._graph(), self.linear_solver, self._current_factors())
+            # Its whole system is solved by CG with the trusted preconditioner; only a fallback factorizes it.
+            self._problem = Problem.from_graph(
+                self._graph(), self.linear_solver, self._current_factors(), fill_reducing=False
+            )
         return self._problem
 
     def _graduating(self, new_loops: np.ndarray) -> np.ndarray:

@@ -91,7 +91,7 @@ class _TrustedSystem:
 
 
 def analysed_pattern(
-    edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend
+    edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend, fill_reducing: bool = True
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
     """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`_OnFirstUse`).
 
@@ -100,12 +100,16 @@ def analysed_pattern(
         fixed: `(N,)` bool, poses without unknowns.
         d: tangent dimension.
         backend: resolved linear-solver backend.
+        fill_reducing: False: the pattern in pose-row order, which the solver orders itself if it
+            is ever used (for a system that CG solves and only a fallback factorizes).
     """
-    free_block = np.cumsum(~fixed) - 1
-    joined = edges[~fixed[edges].any(axis=1)]
-    order = block_order(backend, int(np.count_nonzero(~fixed)), free_block[joined])
+    order = None
+    if fill_reducing:
+        free_block = np.cumsum(~fixed) - 1
+        joined = edges[~fixed[edges].any(axis=1)]
+        order = block_order(backend, int(np.count_nonzero(~fixed)), free_block[joined])
     pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=lower_triangle_only(backend), block_order=order)
-    return pattern, _OnFirstUse(backend, pattern)
+    return pattern, _OnFirstUse(backend, pattern, ordered=fill_reducing)
 
 
 class _OnFirstUse:
@@ -119,15 +123,16 @@ class _OnFirstUse:
 
     name: str
 
-    def __init__(self, backend: Backend, pattern: NormalEquationsPattern):
+    def __init__(self, backend: Backend, pattern: NormalEquationsPattern, ordered: bool = True):
         self.name = backend
         self._pattern = pattern
+        self._ordered = ordered  # whether the pattern is in a fill-reducing order already
         self._solver: LinearSolver | None = None
 
     def _analysed(self) -> LinearSolver:
         if self._solver is None:
             pattern = self._pattern
-            self._solver = make_linear_solver(self.name, pattern.indptr, pattern.indices, ordered=True)
+            self._solver = make_linear_solver(self.name, pattern.indptr, pattern.indices, ordered=self._ordered)
         return self._solver
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:

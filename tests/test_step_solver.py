@@ -161,3 +161,30 @@ def test_a_given_trusted_set_is_analysed_once_across_solves(corrupted, backend):
     steps.set_system(data, products, weights, "auto", trusted=np.ones(graph.num_edges, dtype=bool))
     steps.solve(shift, gradient)
     assert steps.statistics.direct_solves == 1  # every edge given: the direct path
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_system_left_in_pose_row_order_gives_the_same_steps(corrupted, backend):
+    """`fill_reducing=False` (the online solver's whole system): the pattern is in pose-row order,
+    and both the preconditioned step and the fallback's direct step equal the ordered problem's."""
+    graph = corrupted.graph
+    steps_by_order = {}
+    for fill_reducing in (True, False):
+        problem = Problem.from_graph(graph, backend, fill_reducing=fill_reducing)
+        data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+        shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
+        steps = problem.step_solver
+        steps.set_system(data, products, weights, "auto", trusted=weights >= 1e-4)
+        preconditioned = steps.solve(shift, gradient)
+        steps.set_system(data, products, weights, "direct")
+        direct = steps.solve(shift, gradient)
+        assert steps.statistics.cg_solves == 1 and steps.statistics.direct_solves == 1
+        # Per pose, in pose-row order: unknown block free_index[p] belongs to pose p.
+        free = problem.pattern.free_index >= 0
+        blocks = problem.pattern.free_index[free]
+        per_pose = [step.reshape(-1, graph.tangent_dim)[blocks] for step in (preconditioned, direct)]
+        steps_by_order[fill_reducing] = per_pose
+        if not fill_reducing:
+            np.testing.assert_array_equal(blocks, np.arange(len(blocks)))
+    for ordered, row_order in zip(steps_by_order[True], steps_by_order[False]):
+        np.testing.assert_allclose(row_order, ordered, rtol=0, atol=1e-8 * np.abs(ordered).max())
