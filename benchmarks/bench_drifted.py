@@ -10,8 +10,9 @@ deviation), this prints the loop closures each method rejects and the least-squa
 reaches, relative to the least-squares optimum (the lower of `l2` from the guess and from the
 chordal initialization):
 
-- `egnc`: the default (`egnc.solve`), with the chordal start (`GncOptions.chordal_start`);
-- `guess only`: the default before it (`chordal_start=False`);
+- `egnc`: the default (`egnc.solve`), with its other starts (`GncOptions.chordal_start`,
+  `regroup_start`, `elimination_start`);
+- `guess only`: the default before them (all three off);
 - `gtsam-gnc-tls`: GTSAM's GncLMOptimizer (TLS, known inliers = odometry), rejected = loops whose
   `r^2 > chi2.ppf(0.99, d)` at its solution (its own inlier rule); `gtsam-lm`: GTSAM's LM from the
   same guess, over every edge.
@@ -73,9 +74,10 @@ def drifted(graph: PoseGraph, kind: str, level: float, seed: int) -> PoseGraph:
     return graph.with_poses(poses)
 
 
-def solve_egnc(graph: PoseGraph, method: str, init: str, chordal_start: bool) -> dict:
+def solve_egnc(graph: PoseGraph, method: str, init: str, other_starts: bool) -> dict:
     """One egnc solve (child process): rejected loops, all-edge cost, start, time, warnings."""
-    result = egnc.solve(graph, method, init=init, gnc_options=GncOptions(chordal_start=chordal_start))
+    starts = {"chordal_start": other_starts, "regroup_start": other_starts, "elimination_start": other_starts}
+    result = egnc.solve(graph, method, init=init, gnc_options=GncOptions(**starts))
     return {
         "rejected": len(result.rejected_edges),
         "cost": result.cost,
