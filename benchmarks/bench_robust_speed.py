@@ -2,7 +2,7 @@
 
     python benchmarks/bench_robust_speed.py [--datasets manhattanOlson3500,sphere2500]
         [--percent 10,30,50] [--seeds 1] [--backends cholmod,scipy] [--direct] [--before]
-        [--large] [--grid 100000,...] [--importtime]
+        [--large] [--grid 100000,...] [--grid3d 50000,...] [--importtime]
 
 Each row runs in two child processes, so that each solve's peak resident memory is its own: the
 first reads the file (or generates the grid), solves its least squares once untimed (the
@@ -24,6 +24,7 @@ starts.
   `--datasets "" --large` runs only those.
 - `--grid`: add generated 2D grids (`egnc.datasets.grid_world`, seed 1) of these pose counts, at
   each `--percent`; `--datasets "" --grid 100000` runs only those.
+- `--grid3d`: the same with 3D grids (`grid_world(3, ...)`, seed 1).
 - `--importtime`: print the slowest imports of `python -X importtime -c "import egnc"`.
 
 Precision and recall count false loops as positives; ATE is against the clean optimum (m).
@@ -46,13 +47,13 @@ GRID_100K = "grid2d-100k"
 
 
 def _graph(case: dict):
-    """The case's clean graph: a shared file, or a generated 2D grid (`grid2d-<poses>`)."""
+    """The case's clean graph: a shared file, or a generated 2D or 3D grid (`grid2d-<poses>`, `grid3d-<poses>`)."""
     from egnc.datasets import grid_world
     from egnc.io import read_g2o
 
-    if case["dataset"].startswith("grid2d-"):
+    if case["dataset"].startswith(("grid2d-", "grid3d-")):
         poses = 100_000 if case["dataset"] == GRID_100K else int(case["dataset"].split("-")[1])
-        return grid_world(2, poses, seed=1).graph
+        return grid_world(int(case["dataset"][4]), poses, seed=1).graph
     return read_g2o(DATASETS / f"{case['dataset']}.g2o")
 
 
@@ -188,6 +189,7 @@ def main() -> None:
     parser.add_argument("--before", action="store_true")
     parser.add_argument("--large", action="store_true")
     parser.add_argument("--grid", default="", help="generated 2D grids of these pose counts, at each --percent")
+    parser.add_argument("--grid3d", default="", help="generated 3D grids of these pose counts, at each --percent")
     parser.add_argument("--importtime", action="store_true")
     args = parser.parse_args()
     if args.case:
@@ -207,8 +209,9 @@ def main() -> None:
         cases += [{"dataset": "city10000", "percent": 30.0, "seed": 1, "backend": b} for b in backends]
         cases += [{"dataset": GRID_100K, "percent": 10.0, "seed": 1, "backend": b} for b in backends]
     cases += [
-        {"dataset": f"grid2d-{poses}", "percent": float(percent), "seed": 1, "backend": backend}
-        for poses in filter(None, args.grid.split(","))
+        {"dataset": f"grid{dim}d-{poses}", "percent": float(percent), "seed": 1, "backend": backend}
+        for dim, counts in ((2, args.grid), (3, args.grid3d))
+        for poses in filter(None, counts.split(","))
         for percent in args.percent.split(",")
         for backend in backends
     ]
