@@ -53,8 +53,12 @@ def test_ls_scale_reports_a_process_over_the_time_limit_as_not_finished():
     assert len(table) == 1 and table[0][2] == "egnc scipy" and table[0][3].startswith("not finished after")
 
 
-def test_robust_speed_grid3d_rows_are_3d_grids_with_their_decisions():
-    table = rows("bench_robust_speed.py", "--datasets", "", "--grid3d", "300", "--percent", "30", "--backends", "scipy")
+@pytest.mark.parametrize("clean_init", ["file", "chordal"])
+def test_robust_speed_grid3d_rows_are_3d_grids_with_their_decisions(clean_init):
+    table = rows(
+        "bench_robust_speed.py",
+        *("--datasets", "", "--grid3d", "300", "--percent", "30", "--backends", "scipy", "--clean-init", clean_init),
+    )
     assert len(table) == 1
     row = table[0]
     assert row[:4] == ["grid3d-300", "30", "1", "scipy"]
