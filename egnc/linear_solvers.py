@@ -6,14 +6,16 @@ factorization uses it as is. A block ordering is cheaper to compute than a scala
 of d N vertices) and keeps each pose's `d` unknowns together, which suits supernodes. `rslab`
 orders the scalar matrix itself.
 
-- `cholmod`: CHOLMOD through scikit-sparse (optional extra). AMD on the pose graph; the
-  symbolic factorization is computed once per pattern and each solve only refactorizes
-  numerically (supernodal or simplicial, as CHOLMOD decides from the flop count). CHOLMOD reads
-  the lower triangle only, so the pattern stores just that. The calls run on
-  the calling thread only (`serial_native_threads`): CHOLMOD 5.x scatters each supernode in an
-  OpenMP loop with a compiled-in team of 4 threads, far too little work for a fork/join per
-  supernode, and OpenBLAS's worker threads must be woken for every call after the NumPy phases
-  of an iteration. On 2 shared cores each doubled the factorization (see BENCHMARKS.md).
+- `cholmod`: CHOLMOD through scikit-sparse (optional extra). AMD on the pose graph, or METIS
+  (nested dissection) from `METIS_MIN_BLOCKS` free poses on, where its lower fill repays its
+  slower ordering (when the CHOLMOD build has METIS; else AMD). The symbolic factorization is
+  computed once per pattern and each solve only refactorizes numerically (supernodal or
+  simplicial, as CHOLMOD decides from the flop count). CHOLMOD reads the lower triangle only, so
+  the pattern stores just that. The calls run on the calling thread only
+  (`serial_native_threads`): CHOLMOD 5.x scatters each supernode in an OpenMP loop with a
+  compiled-in team of 4 threads, far too little work for a fork/join per supernode, and
+  OpenBLAS's worker threads must be woken for every call after the NumPy phases of an iteration.
+  On 2 shared cores each doubled the factorization (see BENCHMARKS.md).
 - `rslab`: the supernodal `L D L^T` of the rslab package (optional extra, a Rust wheel that
   `pip install` alone brings, no system library). Its analysis (its own fill-reducing ordering
   of the scalar matrix, elimination tree, supernodes) is computed once per pattern and each
@@ -54,6 +56,13 @@ _INSTALL = {
     "cholmod": "scikit-sparse: pip install 'egnc[cholmod]' (after apt-get install libsuitesparse-dev)",
     "rslab": "rslab: pip install 'egnc[rslab]'",
 }
+
+
+METIS_MIN_BLOCKS = 200_000
+"""From this many unknown blocks (free poses) on, the `cholmod` block order is METIS's instead of
+AMD's. On generated 2D grids a factorization with the METIS order took 0.77x the AMD one's time at
+250k poses and 0.5-0.6x at 500k and 1M (16 % less fill), for an ordering that costs 0.7-6 s more
+once per pattern; at 100k the two factorize alike (BENCHMARKS.md, issue 18)."""
 
 
 class NotPositiveDefiniteError(SolverError):
@@ -201,7 +210,12 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
     matrix = (adjacency + sp.diags(degree + 1.0)).tocsc()
     if name == "cholmod":
         cholmod = _cholmod_module()
-        return np.asarray(cholmod.analyze(sp.tril(matrix, format="csc"), ordering_method="amd").P(), dtype=np.int64)
+        lower = sp.tril(matrix, format="csc")
+        try:
+            ordering = cholmod.analyze(lower, ordering_method="metis" if num_blocks >= METIS_MIN_BLOCKS else "amd")
+        except cholmod.CholmodNotInstalledError:  # a CHOLMOD built without METIS
+            ordering = cholmod.analyze(lower, ordering_method="amd")
+        return np.asarray(ordering.P(), dtype=np.int64)
     from scipy.sparse.linalg import splu
 
     lu = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})

@@ -136,3 +136,47 @@ def test_rslab_and_cholmod_give_the_same_robust_solve_of_sphere2500(dataset_path
     np.testing.assert_array_equal(results["rslab"].inliers, results["cholmod"].inliers)
     assert [s.iterations for s in results["rslab"].stages] == [s.iterations for s in results["cholmod"].stages]
     np.testing.assert_allclose(results["rslab"].graph.poses, results["cholmod"].graph.poses, rtol=0, atol=1e-8)
+
+
+def grid_block_pairs(poses: int) -> tuple[int, np.ndarray]:
+    """`(blocks, (K, 2) block pairs)` of a generated 2D grid with pose 0 fixed (as `Problem.from_graph` orders)."""
+    graph = grid_world(2, poses, seed=3).graph
+    joined = graph.edges[(graph.edges != 0).all(axis=1)]
+    return poses - 1, joined - 1
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
+def test_cholmod_orders_a_graph_of_metis_min_blocks_by_nested_dissection_and_solves_alike(monkeypatch):
+    import egnc.linear_solvers as linear_solvers
+
+    blocks, pairs = grid_block_pairs(3000)
+    amd = block_order("cholmod", blocks, pairs)
+    monkeypatch.setattr(linear_solvers, "METIS_MIN_BLOCKS", blocks)
+    metis = block_order("cholmod", blocks, pairs)
+    assert np.array_equal(np.sort(metis), np.arange(blocks)) and not np.array_equal(metis, amd)
+    graph = grid_world(2, 3000, seed=3).graph
+    with_metis = egnc.solve(graph, "l2", linear_solver="cholmod")
+    monkeypatch.setattr(linear_solvers, "METIS_MIN_BLOCKS", blocks + 1)
+    with_amd = egnc.solve(graph, "l2", linear_solver="cholmod")
+    assert with_metis.converged and with_metis.iterations == with_amd.iterations
+    np.testing.assert_allclose(with_metis.graph.poses, with_amd.graph.poses, rtol=0, atol=1e-8)
+
+
+@pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
+def test_cholmod_without_metis_orders_a_large_graph_by_amd(monkeypatch):
+    import sksparse.cholmod
+
+    import egnc.linear_solvers as linear_solvers
+
+    blocks, pairs = grid_block_pairs(500)
+    amd = block_order("cholmod", blocks, pairs)
+    analyze = sksparse.cholmod.analyze
+
+    def without_metis(matrix, **options):
+        if options.get("ordering_method") == "metis":
+            raise sksparse.cholmod.CholmodNotInstalledError("METIS is not installed")
+        return analyze(matrix, **options)
+
+    monkeypatch.setattr(sksparse.cholmod, "analyze", without_metis)
+    monkeypatch.setattr(linear_solvers, "METIS_MIN_BLOCKS", 1)
+    np.testing.assert_array_equal(block_order("cholmod", blocks, pairs), amd)
