@@ -359,22 +359,19 @@ def solve(
             stages += reports
             if other is not None:
                 candidates["chordal"] = other
-        if gnc_options.regroup_start:
-            best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-            other, reports = regrouped_decision(
-                graph, robust, factors, best, options, gnc_options, backend, on_stage, on_iteration
-            )
-            stages += reports
-            if other is not None:
-                candidates["regrouped"] = other
-        if gnc_options.elimination_start:
-            best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-            other, reports = elimination_decision(
-                graph, robust, factors, best, options, gnc_options, backend, on_stage, on_iteration
-            )
-            stages += reports
-            if other is not None:
-                candidates["elimination"] = other
+        later_starts = (
+            ("regrouped", gnc_options.regroup_start, regrouped_decision),
+            ("elimination", gnc_options.elimination_start, elimination_decision),
+        )
+        for name, enabled, decide_from in later_starts:  # each tries to beat the best decision so far
+            if enabled:
+                best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
+                other, reports = decide_from(
+                    graph, robust, factors, best, options, gnc_options, backend, on_stage, on_iteration
+                )
+                stages += reports
+                if other is not None:
+                    candidates[name] = other
         start = "guess"
         for name, candidate in candidates.items():  # a later start must be lower by more than rounding
             if candidate.truncated_cost < candidates[start].truncated_cost * (1 - 1e-9):
