@@ -62,10 +62,17 @@ import numpy as np
 
 from egnc.connectivity import connected_components
 from egnc.factors import BetweenFactors
-from egnc.gnc import GncOptions, StageCallback, StageReport, StageStart, classify_inliers
+from egnc.gnc import GncOptions, StageCallback, StageKind, StageReport, StageStart, classify_inliers
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
-from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
+from egnc.least_squares import (
+    NUMERICAL_FAILURE,
+    IterationCallback,
+    Problem,
+    SolverOptions,
+    SolverResult,
+    solve_least_squares,
+)
 from egnc.linear_solvers import NotPositiveDefiniteError
 from egnc.marginals import covariance_solver, innovations
 
@@ -273,6 +280,28 @@ def truncated_cost(r: np.ndarray, robust: np.ndarray, d: int, quantile: float) -
     return 0.5 * float(np.sum(r2[~robust]) + np.sum(np.minimum(r2[robust], chi2_quantile(quantile, d))))
 
 
+def least_squares_report(
+    solved: SolverResult, started: float, active_edges: int, kind: StageKind, start: StageStart
+) -> StageReport:
+    """The `StageReport` of a least-squares solve (no `mu`) over `active_edges` edges, begun at `started`.
+
+    `started` is a `time.perf_counter()` reading in seconds.
+    """
+    return StageReport(
+        np.nan,
+        np.nan,
+        np.nan,
+        solved.iterations,
+        solved.cost,
+        time.perf_counter() - started,
+        solved.status,
+        active_edges,
+        solved.linear.cg_iterations,
+        kind=kind,
+        start=start,
+    )
+
+
 def decide_outliers(
     graph: PoseGraph,
     poses: np.ndarray,
@@ -333,21 +362,7 @@ def decide_outliers(
             back = readmitted(problem, poses, factors, ~inliers, r, gnc_options.readmit_quantile)
             ever_readmitted |= back
             decided = (decided & inliers) | back
-        reports.append(
-            StageReport(
-                np.nan,
-                np.nan,
-                np.nan,
-                refined.iterations,
-                refined.cost,
-                time.perf_counter() - started,
-                refined.status,
-                int(inliers.sum()),
-                refined.linear.cg_iterations,
-                kind="decision",
-                start=start,
-            )
-        )
+        reports.append(least_squares_report(refined, started, int(inliers.sum()), "decision", start))
         if on_stage is not None:
             on_stage(reports[-1])
         if np.array_equal(decided, inliers) or refined.status in (0, NUMERICAL_FAILURE):  # settled, or stuck

@@ -52,7 +52,7 @@ import time
 import numpy as np
 
 from egnc.chordal import chordal_initialization
-from egnc.decision import Decision, decide_outliers, well_determined
+from egnc.decision import Decision, decide_outliers, least_squares_report, well_determined
 from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions, StageCallback, StageReport
@@ -170,21 +170,7 @@ def elimination_decision(
         problem = Problem.from_graph(graph.subgraph_edges(accepted), linear_solver, factors.subset(accepted))
         solved = solve_least_squares(problem, poses, None, solver_options, on_iteration)
         poses = solved.poses
-        reports.append(
-            StageReport(
-                np.nan,
-                np.nan,
-                np.nan,
-                solved.iterations,
-                solved.cost,
-                time.perf_counter() - started,
-                solved.status,
-                int(accepted.sum()),
-                solved.linear.cg_iterations,
-                kind="elimination",
-                start="elimination",
-            )
-        )
+        reports.append(least_squares_report(solved, started, int(accepted.sum()), "elimination", "elimination"))
         if on_stage is not None:
             on_stage(reports[-1])
         if solved.status == NUMERICAL_FAILURE:
