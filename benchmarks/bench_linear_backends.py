@@ -47,7 +47,6 @@ import argparse
 import json
 import os
 import pickle
-import platform
 import subprocess
 import sys
 import tempfile
@@ -313,17 +312,6 @@ def run_child(case: str, backend: str, graph_file: str, args: argparse.Namespace
     return figures
 
 
-def versions() -> str:
-    """Versions of Python and of the packages the backends use (absent ones are left out)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    found = []
-    for package in DISTRIBUTIONS:
-        try:
-            found.append(f"{package} {version(package)}")
-        except PackageNotFoundError:
-            pass
-    return f"Python {platform.python_version()}, {', '.join(found)}, {os.cpu_count()} cores"
 
 
 def available(backend: str) -> bool:
@@ -350,7 +338,9 @@ def main() -> None:
 
     backends = [b for b in args.backends.split(",") if available(b)]
     skipped = [b for b in args.backends.split(",") if b not in backends]
-    print(f"{time.strftime('%Y-%m-%d', time.gmtime())}; {versions()}")
+    from egnc.bench.report import installed_versions
+
+    print(f"{time.strftime('%Y-%m-%d', time.gmtime())}; {installed_versions(DISTRIBUTIONS, show_absent=False)}")
     if skipped:
         print(f"not installed, skipped: {', '.join(skipped)}")
     print(

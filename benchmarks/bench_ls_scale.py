@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -128,17 +127,6 @@ def summary(runs: list[dict]) -> dict:
     }
 
 
-def versions() -> str:
-    """Python, NumPy, SciPy, scikit-sparse, rslab and gtsam versions, and the core count."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    found = []
-    for package in ("numpy", "scipy", "scikit-sparse", "rslab", "gtsam"):
-        try:
-            found.append(f"{package} {version(package)}")
-        except PackageNotFoundError:
-            found.append(f"{package} absent")
-    return f"Python {platform.python_version()}, {', '.join(found)}, {os.cpu_count()} cores"
 
 
 def main() -> None:
@@ -160,7 +148,10 @@ def main() -> None:
 
     solvers = [f"egnc {backend}" for backend in filter(None, args.backends.split(","))]
     solvers += [] if args.no_gtsam else ["gtsam"]
-    print(f"{time.strftime('%Y-%m-%d %H:%M')}; {versions()}; --init {args.init}\n")
+    from egnc.bench.report import installed_versions
+
+    versions = installed_versions(("numpy", "scipy", "scikit-sparse", "rslab", "gtsam"))
+    print(f"{time.strftime('%Y-%m-%d %H:%M')}; {versions}; --init {args.init}\n")
     print(
         "| poses | edges | solver | wall (s) | solve (s) | peak MiB | cost | iterations | converged"
         " | wall / GTSAM | solve / GTSAM |"

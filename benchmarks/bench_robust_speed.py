@@ -42,7 +42,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -176,17 +175,6 @@ def import_times(top: int = 12) -> list[tuple[int, int, str]]:
     return [egnc_total] + sorted((r for r in rows if r[2] != "egnc"), key=lambda r: -r[1])[:top]
 
 
-def versions() -> str:
-    """Python, NumPy, SciPy, scikit-sparse, rslab versions and the core count."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    found = []
-    for package in ("numpy", "scipy", "scikit-sparse", "rslab"):
-        try:
-            found.append(f"{package} {version(package)}")
-        except PackageNotFoundError:
-            found.append(f"{package} absent")
-    return f"Python {platform.python_version()}, {', '.join(found)}, {os.cpu_count()} cores"
 
 
 def main() -> None:
@@ -228,7 +216,10 @@ def main() -> None:
         for percent in args.percent.split(",")
         for backend in backends
     ]
-    print(f"{time.strftime('%Y-%m-%d')}; {versions()}\n")
+    from egnc.bench.report import installed_versions
+
+    versions = installed_versions(("numpy", "scipy", "scikit-sparse", "rslab"))
+    print(f"{time.strftime('%Y-%m-%d')}; {versions}\n")
     header = (
         "| dataset | false % | seed | backend | clean init | clean l2 (s) | robust (s) | ratio | iterations | CG |"
         " analyses | rounds | rejected / false | P | R | ATE (m) | clean MiB | peak MiB | peak / clean |"

@@ -7,6 +7,7 @@ import importlib.util
 import io
 import math
 import os
+import platform
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,7 @@ from egnc.errors import EgncError
 from egnc.io.atomic import atomic_text_file
 from egnc.plot import save_figure
 
-__all__ = ["SUCCESS_DEFINITION", "SummaryRow", "format_markdown", "summarize", "write_outputs"]
+__all__ = ["SUCCESS_DEFINITION", "SummaryRow", "format_markdown", "installed_versions", "summarize", "write_outputs"]
 
 SUCCESS_DEFINITION = (
     "Precision and recall count the false loop closures as the positive class: precision = rejected "
@@ -245,3 +246,20 @@ def _plot_precision_recall(rows: Sequence[SummaryRow], path: Path) -> None:
         ax.set_title(name)
     figure.colorbar(image, ax=list(axes), shrink=0.9)
     save_figure(figure, path, dpi=PLOT_DPI)
+
+
+def installed_versions(packages: Sequence[str], show_absent: bool = True) -> str:
+    """`"Python 3.11.7, numpy 2.4.6, ..., 2 cores"` for the benchmark scripts' headers.
+
+    A package that is not installed reads `"<name> absent"`, or is left out without `show_absent`.
+    """
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = []
+    for package in packages:
+        try:
+            found.append(f"{package} {version(package)}")
+        except PackageNotFoundError:
+            if show_absent:
+                found.append(f"{package} absent")
+    return f"Python {platform.python_version()}, {', '.join(found)}, {os.cpu_count()} cores"
