@@ -130,6 +130,7 @@ def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc
 
 _LOADED: dict[str, ctypes.CDLL] = {}
 _CHOLMOD_MODULE = "sksparse.cholmod"
+_SUPERLU_MODULE = "scipy.sparse.linalg._dsolve._superlu"
 
 
 def _loaded_library(name: str) -> ctypes.CDLL | None:
@@ -146,12 +147,14 @@ def _loaded_library(name: str) -> ctypes.CDLL | None:
 
 
 def _scipy_openblas() -> ctypes.CDLL | None:
-    """A handle on the OpenBLAS bundled in SciPy's wheels (the BLAS its SuperLU calls), if loaded.
+    """A handle on the OpenBLAS bundled in SciPy's wheels (the BLAS its SuperLU calls), if SuperLU is loaded.
 
     SciPy's wheels ship it as `scipy.libs/libscipy_openblas*` (Linux, Windows) or
     `scipy/.dylibs/libscipy_openblas*` (macOS), with `scipy_`-prefixed symbols; a SciPy built
     against a system BLAS has none (that BLAS is `libblas.so.3`).
     """
+    if _SUPERLU_MODULE not in sys.modules:  # nothing to serialize, and a failed look-up costs 15 us
+        return None
     for path in _scipy_openblas_paths():
         library = _loaded_library(path)
         if library is not None:
