@@ -29,9 +29,9 @@ orders the scalar matrix itself.
   postorder the elimination tree itself; with the same fill, a 100k-pose grid factorizes 7x
   faster (BENCHMARKS.md, issue 18). SuperLU's factorizations and solves run on the calling
   thread, as CHOLMOD's do (`serial_native_threads`): a solve with many right-hand sides calls
-  the OpenBLAS bundled with SciPy for every supernode, and with its worker thread woken for each
-  call the 192-column solve of a readmission batch on manhattanOlson3500 took 5.2 s instead of
-  0.05 s. SciPy has no sparse Cholesky; this is the always-available fallback.
+  the OpenBLAS bundled with SciPy for every supernode, and waking its worker for each call took
+  about 100x the arithmetic on 2 shared cores (BENCHMARKS.md, issue 18). SciPy has no sparse
+  Cholesky; this is the always-available fallback.
 """
 
 from __future__ import annotations
@@ -130,11 +130,11 @@ def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc
 
 _LOADED: dict[str, ctypes.CDLL] = {}
 _CHOLMOD_MODULE = "sksparse.cholmod"
-_SUPERLU_MODULE = "scipy.sparse.linalg._dsolve._superlu"
+_SUPERLU_MODULE = "scipy.sparse.linalg"  # imports SuperLU, which links that OpenBLAS
 
 
 def _loaded_library(name: str) -> ctypes.CDLL | None:
-    """A handle on shared library `name` if something (CHOLMOD) already loaded it, else None.
+    """A handle on shared library `name` if something (CHOLMOD, SciPy) already loaded it, else None.
 
     Handles are cached (creating one costs about 0.1 ms, comparable to a small factorization).
     """
@@ -153,7 +153,7 @@ def _scipy_openblas() -> ctypes.CDLL | None:
     `scipy/.dylibs/libscipy_openblas*` (macOS), with `scipy_`-prefixed symbols; a SciPy built
     against a system BLAS has none (that BLAS is `libblas.so.3`).
     """
-    if _SUPERLU_MODULE not in sys.modules:  # nothing to serialize, and a failed look-up costs 15 us
+    if _SUPERLU_MODULE not in sys.modules:
         return None
     for path in _scipy_openblas_paths():
         library = _loaded_library(path)
@@ -198,8 +198,8 @@ def serial_native_threads() -> Iterator[None]:
     CHOLMOD's `num_threads(4)` clause (unlike `OMP_NUM_THREADS`). OpenBLAS (the `libblas.so.3`
     CHOLMOD links, when it is OpenBLAS, and the one SciPy's SuperLU calls): one thread, unless
     the user chose a count with `OPENBLAS_NUM_THREADS`. Libraries that are not loaded, or are not
-    these, are left alone. CHOLMOD's libraries are looked up only once it is imported: a failed
-    look-up costs about 25 us, as much as a small SuperLU solve's share of the CG iteration.
+    these, are left alone. Each library is looked up only once its user (CHOLMOD, SuperLU) is
+    imported: a failed look-up costs 15-25 us, per call.
     """
     openmp = _loaded_library("libgomp.so.1") if _CHOLMOD_MODULE in sys.modules else None
     levels = openmp.omp_get_max_active_levels() if openmp is not None else None
