@@ -24,7 +24,8 @@ orders the scalar matrix itself.
 - `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (diagonal pivoting),
   which is how SuperLU is best used on SPD matrices. Its minimum-degree ordering on `A + A^T`
   is computed once on the pose graph and then postordered (`postorder`); the factorizations
-  take the matrix in that order instead of reordering it every time. The postorder matters:
+  take the matrix in that order instead of reordering it every time. Computing it factorizes
+  the pose graph (`orders_by_factorizing`), so it waits for a system's first factorization. The postorder matters:
   SuperLU finds its supernodes among consecutive columns but, in symmetric mode, does not
   postorder the elimination tree itself; with the same fill, a 100k-pose grid factorizes 7x
   faster (BENCHMARKS.md, issue 18). SuperLU's factorizations and solves run on the calling
@@ -121,6 +122,12 @@ def resolve_name(name: str) -> Backend:
 def lower_triangle_only(name: str) -> bool:
     """Whether backend `name` reads only the lower triangle of the matrix (so patterns store just that)."""
     return name in ("cholmod", "rslab")
+
+
+def orders_by_factorizing(name: str) -> bool:
+    """Whether `block_order` for backend `name` factorizes the pose graph numerically (SuperLU
+    factorizes what it orders), so that it is best left to a system's first factorization."""
+    return name == "scipy"
 
 
 def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc_matrix:
