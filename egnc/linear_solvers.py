@@ -24,11 +24,15 @@ orders the scalar matrix itself.
 - `scipy`: SuperLU through `scipy.sparse.linalg.splu` in symmetric mode (diagonal pivoting),
   which is how SuperLU is best used on SPD matrices. Its minimum-degree ordering on `A + A^T`
   is computed once on the pose graph and then postordered (`postorder`); the factorizations
-  take the matrix in that order instead of reordering it every time. The postorder matters:
+  take the matrix in that order instead of reordering it every time. Computing it factorizes
+  the pose graph (`orders_by_factorizing`), so it waits for a system's first factorization. The postorder matters:
   SuperLU finds its supernodes among consecutive columns but, in symmetric mode, does not
   postorder the elimination tree itself; with the same fill, a 100k-pose grid factorizes 7x
-  faster (BENCHMARKS.md, issue 18). SciPy has no sparse Cholesky; this is the always-available
-  fallback.
+  faster (BENCHMARKS.md, issue 18). SuperLU's factorizations and solves run on the calling
+  thread, as CHOLMOD's do (`serial_native_threads`): a solve with many right-hand sides calls
+  the OpenBLAS bundled with SciPy for every supernode, and waking its worker for each call took
+  about 100x the arithmetic on 2 shared cores (BENCHMARKS.md, issue 18). SciPy has no sparse
+  Cholesky; this is the always-available fallback.
 """
 
 from __future__ import annotations
@@ -39,6 +43,8 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from functools import cache
+from pathlib import Path
 from types import ModuleType
 from typing import Literal, Protocol
 
@@ -118,16 +124,24 @@ def lower_triangle_only(name: str) -> bool:
     return name in ("cholmod", "rslab")
 
 
+def orders_by_factorizing(name: str) -> bool:
+    """Whether `block_order` for backend `name` factorizes the pose graph numerically (SuperLU
+    factorizes what it orders), so that it is best left to a system's first factorization."""
+    return name == "scipy"
+
+
 def _matrix(data: np.ndarray, indices: np.ndarray, indptr: np.ndarray) -> sp.csc_matrix:
     n = len(indptr) - 1
     return sp.csc_matrix((data, indices, indptr), shape=(n, n), copy=False)
 
 
 _LOADED: dict[str, ctypes.CDLL] = {}
+_CHOLMOD_MODULE = "sksparse.cholmod"
+_SUPERLU_MODULE = "scipy.sparse.linalg"  # imports SuperLU, which links that OpenBLAS
 
 
 def _loaded_library(name: str) -> ctypes.CDLL | None:
-    """A handle on shared library `name` if something (CHOLMOD) already loaded it, else None.
+    """A handle on shared library `name` if something (CHOLMOD, SciPy) already loaded it, else None.
 
     Handles are cached (creating one costs about 0.1 ms, comparable to a small factorization).
     """
@@ -139,32 +153,75 @@ def _loaded_library(name: str) -> ctypes.CDLL | None:
     return _LOADED[name]
 
 
+def _scipy_openblas() -> ctypes.CDLL | None:
+    """A handle on the OpenBLAS bundled in SciPy's wheels (the BLAS its SuperLU calls), if SuperLU is loaded.
+
+    SciPy's wheels ship it as `scipy.libs/libscipy_openblas*` (Linux, Windows) or
+    `scipy/.dylibs/libscipy_openblas*` (macOS), with `scipy_`-prefixed symbols; a SciPy built
+    against a system BLAS has none (that BLAS is `libblas.so.3`).
+    """
+    if _SUPERLU_MODULE not in sys.modules:
+        return None
+    for path in _scipy_openblas_paths():
+        library = _loaded_library(path)
+        if library is not None:
+            return library
+    return None
+
+
+@cache
+def _scipy_openblas_paths() -> tuple[str, ...]:
+    """Paths of the OpenBLAS libraries SciPy's wheels bundle (none for a SciPy on a system BLAS)."""
+    import scipy
+
+    package = Path(scipy.__file__).parent
+    candidates = [*package.parent.glob("scipy.libs/libscipy_openblas*"), *package.glob(".dylibs/libscipy_openblas*")]
+    return tuple(str(path) for path in candidates)
+
+
+def _openblas_thread_counts() -> list[tuple[Callable[[], int], Callable[[int], None]]]:
+    """`(get, set)` of the thread count of each loaded OpenBLAS that egnc's backends call.
+
+    CHOLMOD's (the system `libblas.so.3`, when it is OpenBLAS; looked up only once CHOLMOD is
+    imported) and SciPy's bundled one (SuperLU's). None when the user chose a count with
+    `OPENBLAS_NUM_THREADS`.
+    """
+    if "OPENBLAS_NUM_THREADS" in os.environ:
+        return []
+    system = _loaded_library("libblas.so.3") if _CHOLMOD_MODULE in sys.modules else None
+    counts = []
+    for library, prefix in ((system, "openblas"), (_scipy_openblas(), "scipy_openblas")):
+        if library is not None and hasattr(library, f"{prefix}_set_num_threads"):
+            get, set_threads = (getattr(library, f"{prefix}_{what}_num_threads") for what in ("get", "set"))
+            counts.append((get, set_threads))
+    return counts
+
+
 @contextmanager
 def serial_native_threads() -> Iterator[None]:
-    """Run CHOLMOD's OpenMP regions and its OpenBLAS calls on the calling thread, then restore.
+    """Run the backends' OpenMP regions and OpenBLAS calls on the calling thread, then restore.
 
     OpenMP: `max-active-levels = 0` makes every parallel region inactive, which also overrides
     CHOLMOD's `num_threads(4)` clause (unlike `OMP_NUM_THREADS`). OpenBLAS (the `libblas.so.3`
-    CHOLMOD links, when it is OpenBLAS): one thread, unless the user chose a count with
-    `OPENBLAS_NUM_THREADS`. Libraries that are not loaded, or are not these, are left alone.
+    CHOLMOD links, when it is OpenBLAS, and the one SciPy's SuperLU calls): one thread, unless
+    the user chose a count with `OPENBLAS_NUM_THREADS`. Libraries that are not loaded, or are not
+    these, are left alone. Each library is looked up only once its user (CHOLMOD, SuperLU) is
+    imported: a failed look-up costs 15-25 us, per call.
     """
-    openmp = _loaded_library("libgomp.so.1")
-    blas = None if "OPENBLAS_NUM_THREADS" in os.environ else _loaded_library("libblas.so.3")
-    if blas is not None and not hasattr(blas, "openblas_set_num_threads"):
-        blas = None
+    openmp = _loaded_library("libgomp.so.1") if _CHOLMOD_MODULE in sys.modules else None
     levels = openmp.omp_get_max_active_levels() if openmp is not None else None
-    blas_threads = blas.openblas_get_num_threads() if blas is not None else None
+    blas = [(get(), set_threads) for get, set_threads in _openblas_thread_counts()]
     if openmp is not None:
         openmp.omp_set_max_active_levels(0)
-    if blas is not None:
-        blas.openblas_set_num_threads(1)
+    for _, set_threads in blas:
+        set_threads(1)
     try:
         yield
     finally:
         if openmp is not None:
             openmp.omp_set_max_active_levels(levels)
-        if blas is not None:
-            blas.openblas_set_num_threads(blas_threads)
+        for threads, set_threads in blas:
+            set_threads(threads)
 
 
 def _cholmod_module() -> ModuleType:
@@ -174,7 +231,7 @@ def _cholmod_module() -> ModuleType:
     with more spins its idle workers (0.1 s of system time in a one-second `egnc-solve`). The
     environment is restored at once, and a thread count the user chose is left alone.
     """
-    if "sksparse.cholmod" not in sys.modules and "OPENBLAS_NUM_THREADS" not in os.environ:
+    if _CHOLMOD_MODULE not in sys.modules and "OPENBLAS_NUM_THREADS" not in os.environ:
         os.environ["OPENBLAS_NUM_THREADS"] = "1"
         try:
             from sksparse import cholmod
@@ -353,15 +410,21 @@ class ScipySolver:
 
         matrix = _matrix(data, self._indices, self._indptr)
         try:
-            lu = splu(
-                matrix,
-                permc_spec=self._permc_spec,
-                diag_pivot_thresh=0.0,
-                options={"SymmetricMode": True},
-            )
+            with serial_native_threads():
+                lu = splu(
+                    matrix,
+                    permc_spec=self._permc_spec,
+                    diag_pivot_thresh=0.0,
+                    options={"SymmetricMode": True},
+                )
         except RuntimeError as error:  # SuperLU reports an exactly singular factor this way
             raise NotPositiveDefiniteError(f"normal equations are singular ({error})") from None
-        return lu.solve
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            with serial_native_threads():
+                return lu.solve(rhs)
+
+        return solve
 
 
 def make_linear_solver(name: str, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False) -> LinearSolver:

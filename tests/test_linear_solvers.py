@@ -8,6 +8,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 import egnc
+import egnc.linear_solvers as linear_solvers
 from egnc.datasets import add_false_loops, grid_world
 from egnc.io import read_g2o
 from egnc.linear_solvers import (
@@ -125,17 +126,73 @@ def test_rslab_reports_indefinite_and_singular_matrices_as_not_positive_definite
             solver.factorize(lower_data(matrix))
 
 
-@needs_rslab
 @pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
-def test_rslab_and_cholmod_give_the_same_robust_solve_of_sphere2500(dataset_path):
+@pytest.mark.parametrize("backend", [pytest.param("rslab", marks=needs_rslab), "scipy"])
+def test_backend_and_cholmod_give_the_same_robust_solve_of_sphere2500(dataset_path, backend):
     graph = read_g2o(dataset_path("sphere2500.g2o"))
     reference = egnc.solve(graph, "l2", linear_solver="cholmod")
     corrupted = add_false_loops(graph, 10, seed=1, reference_poses=reference.graph.poses).graph
-    results = {backend: egnc.solve(corrupted, linear_solver=backend) for backend in ("cholmod", "rslab")}
-    assert results["rslab"].linear_solver == "rslab"
-    np.testing.assert_array_equal(results["rslab"].inliers, results["cholmod"].inliers)
-    assert [s.iterations for s in results["rslab"].stages] == [s.iterations for s in results["cholmod"].stages]
-    np.testing.assert_allclose(results["rslab"].graph.poses, results["cholmod"].graph.poses, rtol=0, atol=1e-8)
+    results = {name: egnc.solve(corrupted, linear_solver=name) for name in ("cholmod", backend)}
+    assert results[backend].linear_solver == backend
+    np.testing.assert_array_equal(results[backend].inliers, results["cholmod"].inliers)
+    assert [s.iterations for s in results[backend].stages] == [s.iterations for s in results["cholmod"].stages]
+    np.testing.assert_allclose(results[backend].graph.poses, results["cholmod"].graph.poses, rtol=0, atol=1e-8)
+
+
+needs_scipy_openblas = pytest.mark.skipif(
+    linear_solvers._scipy_openblas() is None, reason="SciPy without its bundled OpenBLAS"
+)
+
+
+@needs_scipy_openblas
+def test_serial_native_threads_runs_scipys_openblas_on_one_thread_and_restores_its_count(monkeypatch):
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    library = linear_solvers._scipy_openblas()
+    before = library.scipy_openblas_get_num_threads()
+    library.scipy_openblas_set_num_threads(2)
+    try:
+        with linear_solvers.serial_native_threads():
+            assert library.scipy_openblas_get_num_threads() == 1
+        assert library.scipy_openblas_get_num_threads() == 2
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")  # the user's choice is left alone
+        with linear_solvers.serial_native_threads():
+            assert library.scipy_openblas_get_num_threads() == 2
+    finally:
+        library.scipy_openblas_set_num_threads(before)
+
+
+@needs_scipy_openblas
+def test_superlu_factorizes_and_solves_on_one_openblas_thread(monkeypatch):
+    import scipy.sparse.linalg
+
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    library = linear_solvers._scipy_openblas()
+    seen = []
+
+    class Recorded:
+        def __init__(self, lu):
+            self.lu = lu
+
+        def solve(self, rhs):
+            seen.append(("solve", library.scipy_openblas_get_num_threads()))
+            return self.lu.solve(rhs)
+
+    def recorded_splu(*args, **kwargs):
+        seen.append(("factorize", library.scipy_openblas_get_num_threads()))
+        return Recorded(splu(*args, **kwargs))
+
+    monkeypatch.setattr(scipy.sparse.linalg, "splu", recorded_splu)
+    matrix = sp.csc_matrix(random_spd(40, 0.1, seed=2))
+    before = library.scipy_openblas_get_num_threads()
+    library.scipy_openblas_set_num_threads(2)
+    try:
+        solve = make_linear_solver("scipy", matrix.indptr, matrix.indices).factorize(matrix.data)
+        x = solve(np.ones((40, 3)))
+        assert library.scipy_openblas_get_num_threads() == 2
+    finally:
+        library.scipy_openblas_set_num_threads(before)
+    assert seen == [("factorize", 1), ("solve", 1)]
+    np.testing.assert_allclose(matrix @ x, np.ones((40, 3)), atol=1e-12)
 
 
 def grid_block_pairs(poses: int) -> tuple[int, np.ndarray]:
@@ -147,8 +204,6 @@ def grid_block_pairs(poses: int) -> tuple[int, np.ndarray]:
 
 @pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
 def test_cholmod_orders_a_graph_of_metis_min_blocks_by_nested_dissection_and_solves_alike(monkeypatch):
-    import egnc.linear_solvers as linear_solvers
-
     blocks, pairs = grid_block_pairs(3000)
     amd = block_order("cholmod", blocks, pairs)
     monkeypatch.setattr(linear_solvers, "METIS_MIN_BLOCKS", blocks)
@@ -165,8 +220,6 @@ def test_cholmod_orders_a_graph_of_metis_min_blocks_by_nested_dissection_and_sol
 @pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
 def test_cholmod_without_metis_orders_a_large_graph_by_amd(monkeypatch):
     import sksparse.cholmod
-
-    import egnc.linear_solvers as linear_solvers
 
     blocks, pairs = grid_block_pairs(500)
     amd = block_order("cholmod", blocks, pairs)

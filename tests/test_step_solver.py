@@ -188,3 +188,45 @@ def test_a_system_left_in_pose_row_order_gives_the_same_steps(corrupted, backend
             np.testing.assert_array_equal(blocks, np.arange(len(blocks)))
     for ordered, row_order in zip(steps_by_order[True], steps_by_order[False]):
         np.testing.assert_allclose(row_order, ordered, rtol=0, atol=1e-8 * np.abs(ordered).max())
+
+
+def test_scipy_orders_a_system_at_its_first_factorization_and_solves_it_as_if_built_in_that_order(
+    corrupted, monkeypatch
+):
+    """SuperLU's block order costs a factorization: a pattern stays in pose-row order until it is
+    factorized, and its direct step then equals, bit for bit, that of the pattern built in order."""
+    import egnc.step_solver as step_solver
+
+    graph = corrupted.graph
+    orders = []
+    block_order = step_solver.block_order
+
+    def counted_block_order(*args):
+        orders.append(args)
+        return block_order(*args)
+
+    monkeypatch.setattr(step_solver, "block_order", counted_block_order)
+    direct_steps = {}
+    for deferred in (False, True):
+        monkeypatch.setattr(step_solver, "orders_by_factorizing", lambda name, deferred=deferred: deferred)
+        orders.clear()
+        problem = Problem.from_graph(graph, "scipy")
+        free = problem.pattern.free_index >= 0
+        blocks = problem.pattern.free_index[free]
+        assert np.array_equal(blocks, np.arange(len(blocks))) == deferred
+        assert len(orders) == (0 if deferred else 1)
+        data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
+        shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
+        steps = problem.step_solver
+        steps.set_system(data, products, weights, "direct")
+        direct_steps[deferred] = [steps.solve(shift, gradient).reshape(-1, graph.tangent_dim)[blocks]]
+        assert len(orders) == 1
+        # Many right-hand sides (as the marginal covariances solve), given in pose-row order.
+        unknowns = (blocks[:, None] * graph.tangent_dim + np.arange(graph.tangent_dim)).ravel()
+        rhs = np.random.default_rng(0).normal(size=(len(unknowns), 70))
+        laid_out = np.empty_like(rhs)
+        laid_out[unknowns] = rhs
+        direct_steps[deferred].append(problem.linear_solver.factorize(data)(laid_out)[unknowns])
+        assert len(orders) == 1  # a second factorization reuses the order
+    for deferred_step, ordered_step in zip(direct_steps[True], direct_steps[False]):
+        np.testing.assert_array_equal(deferred_step, ordered_step)
