@@ -2,7 +2,8 @@
 
     python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
-        [--regraduate reference|new] [--strong-at-arrival] [--linear-solver auto] [--json results.jsonl]
+        [--regraduate reference|new] [--strong-at-arrival] [--rel-cost-tol TOL] [--linear-solver auto]
+        [--json results.jsonl]
 
 For every dataset and percentage, the clean graph's least-squares optimum is the reference; the
 graph is corrupted with riSAM-protocol false loops (`egnc.datasets.add_false_loops`, seeded) and
@@ -51,6 +52,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         regraduate=args.regraduate,
         stage_iterations=args.stage_iterations or None,
         strong_at_arrival=args.strong_at_arrival,
+        **({} if args.rel_cost_tol is None else {"rel_cost_tol": args.rel_cost_tol}),
     )
     outcome = replay(graph, method, known_inliers=known, linear_solver=args.linear_solver, online_options=options)
     steps = replay_steps(graph, known)
@@ -121,6 +123,9 @@ def main() -> int:
     parser.add_argument("--stage-iterations", type=int, default=1, help="0: every stage converges")
     parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
     parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
+    parser.add_argument(
+        "--rel-cost-tol", type=float, help="OnlineOptions.rel_cost_tol (default: its default): where an update stops"
+    )
     parser.add_argument("--linear-solver", default="auto")
     parser.add_argument("--json", type=Path, help="append one JSON line per row here")
     args = parser.parse_args()

@@ -113,9 +113,8 @@ class OnlineOptions:
             arrival, it rejects 15 true loops and bends the map (P 0.936, ATE 19.7 m instead of
             1.0 and 1.93 m).
         rel_cost_tol: the last stage of an update stops when an accepted step lowers the cost
-            by at most this fraction (riSAM converges to 1e-2). Measured (BENCHMARKS.md): 1e-2
-            halves the iterations and doubles the true loops the running decision rejects on
-            manhattanOlson3500 with 50 % false loops.
+            by at most this fraction (riSAM stops at 1e-2; docs/online.md says how the default
+            was chosen).
     """
 
     regraduate: Literal["reference", "new"] = "reference"
@@ -123,7 +122,7 @@ class OnlineOptions:
     high_quantile: float = 0.9
     stage_iterations: int | None = 1
     strong_at_arrival: bool = False
-    rel_cost_tol: float = 1e-6
+    rel_cost_tol: float = 1e-4
 
     def __post_init__(self) -> None:
         if self.regraduate not in ("reference", "new"):
