@@ -499,10 +499,10 @@ class OnlineSolver:
         intermediate = tight
         if self.online_options.stage_iterations is not None:
             intermediate = replace(tight, max_iterations=self.online_options.stage_iterations)
-        # One preconditioner for the whole update: the edges the map already trusts. The new loops
-        # stay out of it (CG takes them as low-rank terms), so the stages share one analysis.
+        # One preconditioner for all stages of the update (one analysis): the edges whose weight is
+        # at least trust_weight at its start, the new loops (at mu_init) included, so that CG has
+        # only the switched-off loops left to resolve.
         trusted = KernelLoss(self._kernel, self._mu, self._robust).weight(self._r) >= self.options.trust_weight
-        trusted[new_loops] = False
         self._mu[graduating] = self._mu_init[graduating]
         active = graduating & (self._mu < 1.0)  # loops whose mu still moves this update
         strong = np.zeros(len(self._edges), dtype=bool)
