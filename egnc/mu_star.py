@@ -23,19 +23,16 @@ Consequences:
 
 Numerics: q and s are logistic functions of `log u - log c^2 = 2 mu log r - 2 log c`, so nothing
 overflows for any finite r, and G in this form loses no digits to cancellation away from the
-root. All factors are solved in one call of `scipy.optimize.elementwise.find_root`
-(Chandrupatla's bracketing method) on the bracket [1/2, 1], to an absolute tolerance of 1e-14 in
-mu and with the function-value tolerances switched off (G near the root can be far below 1e-300
-for huge r, which must not count as converged).
+root. All factors are solved at once by bisection on the bracket [1/2, 1], halved until it is
+narrower than 1e-14 (47 halvings): it tests only the sign of G, which stays exact where G near
+the root is far below 1e-300 for huge r, and it costs well under a millisecond for hundreds of
+factors.
 
 References:
     - M. McGann, F. Dellaert, M. Kaess, "Robust Incremental Smoothing and Mapping (riSAM)",
       ICRA 2023 (the SIG kernel).
     - Kang et al., "Efficient Graduated Non-Convexity for Pose Graph Optimization" (EGNC-PGO),
       eq. 2 and the convexity boundary mu*.
-    - T. R. Chandrupatla, "A new hybrid quadratic/bisection algorithm for finding the zero of a
-      nonlinear function without using derivatives", Advances in Engineering Software 28(3),
-      1997.
 """
 
 from __future__ import annotations
@@ -49,6 +46,9 @@ from egnc.errors import EgncError
 
 MU_STAR_XATOL = 1e-14
 """Absolute tolerance on each root mu*."""
+
+_HALVINGS = math.ceil(math.log2(0.5 / MU_STAR_XATOL))
+"""Bisection steps that shrink the bracket [1/2, 1] below `MU_STAR_XATOL`."""
 
 
 def convexity_margin(mu: ArrayLike, log_r2: ArrayLike, log_c2: ArrayLike) -> np.ndarray:
@@ -103,19 +103,10 @@ def mu_star(r: ArrayLike, c: float = 3.0) -> np.ndarray:
     out[active[at_half]] = 0.5
     active, log_r2 = active[~at_half], log_r2[~at_half]
     if active.size:
-        from scipy.optimize.elementwise import find_root  # 0.1 s of imports, paid only when used
-
-        result = find_root(
-            convexity_margin,
-            (0.5, 1.0),
-            args=(log_r2, log_c2),
-            tolerances={"xatol": MU_STAR_XATOL, "xrtol": 0.0, "fatol": 0.0, "frtol": 0.0},
-        )
-        if not np.all(result.success):
-            # G(1/2) = q^2 > 0 > G(1) and G is continuous, so only a bug can land here.
-            bad = np.flatnonzero(~result.success)
-            raise EgncError(
-                f"mu* root solve failed for {bad.size} factor(s), status {result.status[bad][:5]}"
-            )
-        out[active] = result.x
+        low, high = np.full(active.size, 0.5), np.ones(active.size)  # G(low) > 0 > G(high)
+        for _ in range(_HALVINGS):
+            middle = 0.5 * (low + high)
+            convex = convexity_margin(middle, log_r2, log_c2) > 0.0
+            low, high = np.where(convex, middle, low), np.where(convex, high, middle)
+        out[active] = 0.5 * (low + high)
     return out.reshape(r.shape)
