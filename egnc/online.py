@@ -98,20 +98,14 @@ class OnlineOptions:
             graduated again and keeps its Geman-McClure weight, which comes back by itself if the
             map moves towards it.
         stage_iterations: at most this many solver steps per graduation stage but the last,
-            which converges (to `GncOptions.stage_rel_cost_tol`); None: every stage converges.
-            riSAM and EGNC-PGO take one step per `mu` value (one iSAM2 update each). Measured
-            (BENCHMARKS.md, CSAIL and Intel at 30 %): 1 step halves the iterations of converged
-            stages with the same decisions.
+            which converges (to `rel_cost_tol`); None: every stage converges. riSAM and EGNC-PGO
+            take one step per `mu` value (one iSAM2 update each).
         strong_at_arrival: `egnc` only: a new loop whose residual at the current (converged)
             estimate is above the strong-outlier threshold (`high_quantile`) is a strong outlier
             at once and starts at `mu = 1`, as EGNC's Algorithm 1 treats a factor found strong
             after a solve; it skips the `mu = 0` stage, where a false loop would bend the map.
-            Off by default (EGNC-PGO starts every new loop at 0). Measured (BENCHMARKS.md): on
-            the riSAM-protocol false loops it helps (manhattanOlson3500 at 50 %: P 1.0 and ATE
-            0 m instead of 0.988 and 0.44 m, 0.37x the iterations, p99 58 instead of 461 ms),
-            but on manhattan_noisy.irl, whose drifted odometry puts true loops far off at
-            arrival, it rejects 15 true loops and bends the map (P 0.936, ATE 19.7 m instead of
-            1.0 and 1.93 m).
+            Off by default (EGNC-PGO starts every new loop at 0): drifted odometry puts true
+            loops far off at arrival too (docs/online.md has the measurements).
         rel_cost_tol: the last stage of an update stops when an accepted step lowers the cost
             by at most this fraction (riSAM stops at 1e-2; docs/online.md says how the default
             was chosen).
