@@ -99,12 +99,23 @@ def test_cli_workers_and_dask_exclude_each_other():
 
 @pytest.fixture(scope="module")
 def cluster():
-    """Two single-threaded worker processes on the loopback address."""
+    """Two single-threaded worker processes on the loopback address.
+
+    LocalCluster leaves `OPENBLAS_NUM_THREADS=1` (and OMP, MKL) in this process's environment for
+    its workers; it is restored afterwards, since egnc reads that variable as the user's choice of
+    BLAS threads (`egnc.linear_solvers.serial_native_threads`) and later tests compare solves bit
+    for bit.
+    """
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
-    ) as local:
-        yield local
+    saved = dict(os.environ)
+    try:
+        with distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+        ) as local:
+            yield local
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
 
 
 def test_dask_cluster_gives_the_serial_table(serial, cluster):
