@@ -24,7 +24,7 @@ Consequences:
 Numerics: q and s are logistic functions of `log u - log c^2 = 2 mu log r - 2 log c`, so nothing
 overflows for any finite r, and G in this form loses no digits to cancellation away from the
 root. All factors are solved at once by bisection on the bracket [1/2, 1], halved until it is
-narrower than 1e-14 (47 halvings): it tests only the sign of G, which stays exact where G near
+narrower than 1e-14 (46 halvings): it tests only the sign of G, which stays exact where G near
 the root is far below 1e-300 for huge r, and it costs well under a millisecond for hundreds of
 factors.
 
