@@ -12,7 +12,7 @@ import numpy as np
 
 from egnc.checks import check_callable, check_choice, check_instance
 from egnc.chordal import chordal_initialization
-from egnc.decision import decide_outliers, truncated_cost
+from egnc.decision import StartContext, decide_outliers, truncated_cost
 from egnc.diagnostics import solve_warnings
 from egnc.elimination import elimination_decision
 from egnc.errors import EgncError, GraphError, OptionError
@@ -351,11 +351,10 @@ def solve(
         decision = decide_outliers(graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration)
         stages += decision.reports
         candidates = {"guess": decision}
+        context = StartContext(graph, robust, factors, options, gnc_options, backend, on_stage, on_iteration)
         if gnc_options.chordal_start:
             trusted = ~robust | (outcome.weights >= options.trust_weight)
-            other, reports = chordal_decision(
-                graph, robust, factors, decision, trusted, options, gnc_options, backend, on_stage, on_iteration
-            )
+            other, reports = chordal_decision(context, decision, trusted)
             stages += reports
             if other is not None:
                 candidates["chordal"] = other
@@ -366,9 +365,7 @@ def solve(
         for name, enabled, decide_from in later_starts:  # each tries to beat the best decision so far
             if enabled:
                 best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-                other, reports = decide_from(
-                    graph, robust, factors, best, options, gnc_options, backend, on_stage, on_iteration
-                )
+                other, reports = decide_from(context, best)
                 stages += reports
                 if other is not None:
                     candidates[name] = other

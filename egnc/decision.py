@@ -60,8 +60,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from egnc.chordal import chordal_initialization
 from egnc.connectivity import connected_components
-from egnc.factors import BetweenFactors
+from egnc.errors import SolverError
+from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions, StageCallback, StageKind, StageReport, StageStart, classify_inliers
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
@@ -381,3 +383,53 @@ def decide_outliers(
         settled=settled,
         truncated_cost=truncated_cost(r, robust, d, gnc_options.outlier_quantile),
     )
+
+
+@dataclass(frozen=True, eq=False)
+class StartContext:
+    """What every further start of the batch decision works on (`egnc.starts`, `egnc.regroup`,
+    `egnc.elimination`): each tries to beat the best decision so far from poses of its own.
+
+    Attributes:
+        graph: the pose graph.
+        robust: `(E,)` bool, the loop closures that may be rejected.
+        factors: the graph's factors.
+        solver_options: options of each least-squares solve.
+        gnc_options: outlier test and readmission options.
+        linear_solver: resolved backend name.
+        on_stage, on_iteration: progress callbacks (each solve a start runs is a stage).
+    """
+
+    graph: PoseGraph
+    robust: np.ndarray
+    factors: BetweenFactors
+    solver_options: SolverOptions
+    gnc_options: GncOptions
+    linear_solver: str
+    on_stage: StageCallback | None = None
+    on_iteration: IterationCallback | None = None
+
+    def chordal_poses(self, keep: np.ndarray) -> np.ndarray | None:
+        """`(N, n, n)` chordal initialization over the edges `keep` `(E,)` bool, or None when the
+        backend cannot factorize its system."""
+        try:
+            chordal = chordal_initialization(self.graph.subgraph_edges(keep), linear_solver=self.linear_solver)
+        except SolverError:
+            return None
+        return to_matrices(self.graph.dim, chordal)
+
+    def decide(self, poses: np.ndarray, inliers: np.ndarray, start: StageStart) -> Decision:
+        """`decide_outliers` from `poses` `(N, n, n)` and the first classification `inliers` `(E,)`."""
+        return decide_outliers(
+            self.graph,
+            poses,
+            self.robust,
+            self.solver_options,
+            self.gnc_options,
+            self.linear_solver,
+            self.factors,
+            self.on_stage,
+            self.on_iteration,
+            inliers,
+            start=start,
+        )

@@ -51,14 +51,12 @@ import time
 
 import numpy as np
 
-from egnc.chordal import chordal_initialization
-from egnc.decision import Decision, decide_outliers, least_squares_report, well_determined
-from egnc.errors import SolverError
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions, StageCallback, StageReport
+from egnc.decision import Decision, StartContext, least_squares_report, well_determined
+from egnc.factors import BetweenFactors
+from egnc.gnc import GncOptions, StageReport
 from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
-from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
+from egnc.least_squares import NUMERICAL_FAILURE, Problem, solve_least_squares
 from egnc.linear_solvers import NotPositiveDefiniteError
 from egnc.marginals import relative_covariances
 
@@ -123,56 +121,40 @@ def undecided(
     return agree & ~well_determined(relative, loops.information)
 
 
-def elimination_decision(
-    graph: PoseGraph,
-    robust: np.ndarray,
-    factors: BetweenFactors,
-    to_beat: Decision,
-    solver_options: SolverOptions,
-    gnc_options: GncOptions,
-    linear_solver: str,
-    on_stage: StageCallback | None = None,
-    on_iteration: IterationCallback | None = None,
-) -> tuple[Decision | None, tuple[StageReport, ...]]:
+def elimination_decision(context: StartContext, to_beat: Decision) -> tuple[Decision | None, tuple[StageReport, ...]]:
     """The decision started by backward elimination over every edge, unless it cannot beat `to_beat` (module docstring).
 
     Args:
-        graph: the pose graph.
-        robust: `(E,)` bool, the loop closures that may be rejected.
-        factors: the graph's factors.
+        context: the graph, its factors, options and callbacks (each elimination step and each
+            round is a stage).
         to_beat: the best decision of the other starts.
-        solver_options: options of each least-squares solve.
-        gnc_options: outlier test and readmission options.
-        linear_solver: resolved backend name.
-        on_stage, on_iteration: progress callbacks (each elimination step and each round is a stage).
 
     Returns:
         `(decision, reports)`: the decision, or None where the start did not run or stopped
         early (nothing undecided, over budget, no chordal map, a failed solve, past the step
-        bound), and the
-        reports of every solve run here.
+        bound), and the reports of every solve run here.
     """
+    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
     threshold = chi2_quantile(q, d)
     max_steps = int(2.0 * to_beat.truncated_cost / threshold)
     if int(np.count_nonzero(robust)) * max(max_steps, 1) > STEP_BUDGET:
         return None, ()
-    if not undecided(graph, robust, factors, to_beat, gnc_options, linear_solver).any():
-        return None, ()
-    try:
-        poses = to_matrices(graph.dim, chordal_initialization(graph, linear_solver=linear_solver))
-    except SolverError:  # a chordal system the backend cannot factorize: no elimination start
+    if not undecided(graph, robust, factors, to_beat, gnc_options, context.linear_solver).any():
         return None, ()
     accepted = np.ones(graph.num_edges, dtype=bool)
+    poses = context.chordal_poses(accepted)
+    if poses is None:  # a chordal system the backend cannot factorize: no elimination start
+        return None, ()
     reports: list[StageReport] = []
     for _ in range(max_steps + 1):
         started = time.perf_counter()
-        problem = Problem.from_graph(graph.subgraph_edges(accepted), linear_solver, factors.subset(accepted))
-        solved = solve_least_squares(problem, poses, None, solver_options, on_iteration)
+        problem = Problem.from_graph(graph.subgraph_edges(accepted), context.linear_solver, factors.subset(accepted))
+        solved = solve_least_squares(problem, poses, None, context.solver_options, context.on_iteration)
         poses = solved.poses
         reports.append(least_squares_report(solved, started, int(accepted.sum()), "elimination", "elimination"))
-        if on_stage is not None:
-            on_stage(reports[-1])
+        if context.on_stage is not None:
+            context.on_stage(reports[-1])
         if solved.status == NUMERICAL_FAILURE:
             return None, tuple(reports)
         loops = np.flatnonzero(accepted & robust)
@@ -185,17 +167,5 @@ def elimination_decision(
         accepted[loops[np.argmax(statistics)]] = False
     else:
         return None, tuple(reports)  # past the step bound: it cannot beat `to_beat`
-    decision = decide_outliers(
-        graph,
-        poses,
-        robust,
-        solver_options,
-        gnc_options,
-        linear_solver,
-        factors,
-        on_stage,
-        on_iteration,
-        accepted,
-        start="elimination",
-    )
+    decision = context.decide(poses, accepted, "elimination")
     return decision, (*reports, *decision.reports)

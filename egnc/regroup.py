@@ -28,15 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from egnc.chordal import chordal_initialization
 from egnc.connectivity import connected_components
-from egnc.decision import Decision, decide_outliers
-from egnc.errors import SolverError
-from egnc.factors import BetweenFactors, group_of, to_matrices
-from egnc.gnc import GncOptions, StageCallback, StageReport, classify_inliers
-from egnc.graph import PoseGraph
+from egnc.decision import Decision, StartContext
+from egnc.factors import BetweenFactors, group_of
+from egnc.gnc import StageReport, classify_inliers
 from egnc.kernels import chi2_quantile
-from egnc.least_squares import IterationCallback, SolverOptions
 
 RUN_WINDOW = 10
 """Two loops belong to one run when both their ends are at most this many poses (rows) apart."""
@@ -109,33 +105,18 @@ def loop_runs(loops: BetweenFactors, poses: np.ndarray, threshold: float, window
     return connected_components(len(loops.edges), pairs)[1]
 
 
-def regrouped_decision(
-    graph: PoseGraph,
-    robust: np.ndarray,
-    factors: BetweenFactors,
-    to_beat: Decision,
-    solver_options: SolverOptions,
-    gnc_options: GncOptions,
-    linear_solver: str,
-    on_stage: StageCallback | None = None,
-    on_iteration: IterationCallback | None = None,
-) -> tuple[Decision | None, tuple[StageReport, ...]]:
+def regrouped_decision(context: StartContext, to_beat: Decision) -> tuple[Decision | None, tuple[StageReport, ...]]:
     """The decision with `to_beat`'s rejected runs of loops put back together (module docstring).
 
     Args:
-        graph: the pose graph.
-        robust: `(E,)` bool, the loop closures that may be rejected.
-        factors: the graph's factors.
+        context: the graph, its factors, options and callbacks (each round is a stage).
         to_beat: the best decision of the other starts.
-        solver_options: options of the decision rounds.
-        gnc_options: outlier test and readmission options.
-        linear_solver: resolved backend name.
-        on_stage, on_iteration: progress callbacks (each round is a stage).
 
     Returns:
         `(decision, reports)`: the decision, or None where no run of `MIN_RUN` rejected loops
         exists or the chordal system cannot be factorized, and the reports of its rounds.
     """
+    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
     rejected = np.flatnonzero(robust & ~to_beat.inliers)
     threshold = chi2_quantile(gnc_options.readmit_quantile, graph.tangent_dim)
     labels = loop_runs(factors.subset(rejected), to_beat.poses, threshold)
@@ -144,25 +125,9 @@ def regrouped_decision(
         return None, ()
     regrouped = to_beat.inliers.copy()
     regrouped[rejected[in_run]] = True
-    try:
-        poses = to_matrices(
-            graph.dim, chordal_initialization(graph.subgraph_edges(regrouped), linear_solver=linear_solver)
-        )
-    except SolverError:  # a chordal system the backend cannot factorize: no regrouped start
+    poses = context.chordal_poses(regrouped)
+    if poses is None:  # a chordal system the backend cannot factorize: no regrouped start
         return None, ()
     r = factors.whitened_norms(factors.residuals(poses))
-    inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
-    decision = decide_outliers(
-        graph,
-        poses,
-        robust,
-        solver_options,
-        gnc_options,
-        linear_solver,
-        factors,
-        on_stage,
-        on_iteration,
-        inliers,
-        start="regrouped",
-    )
+    decision = context.decide(poses, classify_inliers(r, robust, graph.tangent_dim, gnc_options), "regrouped")
     return decision, decision.reports

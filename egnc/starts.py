@@ -37,13 +37,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from egnc.chordal import chordal_initialization
-from egnc.decision import Decision, decide_outliers, truncated_cost
-from egnc.errors import SolverError
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions, StageCallback, StageReport, classify_inliers
-from egnc.graph import PoseGraph
-from egnc.least_squares import IterationCallback, Problem, SolverOptions, solve_least_squares
+from egnc.decision import Decision, StartContext, truncated_cost
+from egnc.gnc import StageReport, classify_inliers
+from egnc.least_squares import Problem, solve_least_squares
 
 PROBE_ITERATIONS = 2
 """Least-squares iterations a chordal classification gets to show a lower truncated cost than
@@ -56,41 +52,25 @@ where the probe would factorize every false loop's fill-in for nothing."""
 
 
 def chordal_decision(
-    graph: PoseGraph,
-    robust: np.ndarray,
-    factors: BetweenFactors,
-    to_beat: Decision,
-    trusted: np.ndarray,
-    solver_options: SolverOptions,
-    gnc_options: GncOptions,
-    linear_solver: str,
-    on_stage: StageCallback | None = None,
-    on_iteration: IterationCallback | None = None,
+    context: StartContext, to_beat: Decision, trusted: np.ndarray
 ) -> tuple[Decision | None, tuple[StageReport, ...]]:
     """The decision started from the chordal initialization, unless it cannot beat `to_beat` (module docstring).
 
     Args:
-        graph: the pose graph.
-        robust: `(E,)` bool, the loop closures that may be rejected.
-        factors: the graph's factors.
+        context: the graph, its factors, options and callbacks (the probe and each round are stages).
         to_beat: the decision started from the initial guess.
         trusted: `(E,)` bool, the edges the chordal initialization uses: those the GNC stage
             had not switched off (IRLS weight at least `SolverOptions.trust_weight`).
-        solver_options: options of the probe and of the decision rounds.
-        gnc_options: outlier test and readmission options.
-        linear_solver: resolved backend name.
-        on_stage, on_iteration: progress callbacks (the probe and each round are stages).
 
     Returns:
         `(decision, reports)`: the chordal start's decision, or None where it stopped early (same
         classification, gate, probe), and the reports of every solve run here (the probe and
         the rounds).
     """
+    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
-    try:
-        chordal = chordal_initialization(graph.subgraph_edges(trusted), linear_solver=linear_solver)
-        poses = to_matrices(graph.dim, chordal)
-    except SolverError:  # a chordal system the backend cannot factorize: no second start
+    poses = context.chordal_poses(trusted)
+    if poses is None:  # a chordal system the backend cannot factorize: no second start
         return None, ()
     r = factors.whitened_norms(factors.residuals(poses))
     inliers = classify_inliers(r, robust, d, gnc_options)
@@ -99,9 +79,9 @@ def chordal_decision(
         or truncated_cost(r, robust, d, q) > PROBE_GATE * to_beat.truncated_cost
     ):
         return None, ()
-    problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver, factors.subset(inliers))
-    probe_options = replace(solver_options, max_iterations=PROBE_ITERATIONS)
-    probe = solve_least_squares(problem, poses, None, probe_options, on_iteration)
+    problem = Problem.from_graph(graph.subgraph_edges(inliers), context.linear_solver, factors.subset(inliers))
+    probe_options = replace(context.solver_options, max_iterations=PROBE_ITERATIONS)
+    probe = solve_least_squares(problem, poses, None, probe_options, context.on_iteration)
     report = StageReport(
         np.nan,
         np.nan,
@@ -115,22 +95,10 @@ def chordal_decision(
         kind="probe",
         start="chordal",
     )
-    if on_stage is not None:
-        on_stage(report)
+    if context.on_stage is not None:
+        context.on_stage(report)
     probe_r = factors.whitened_norms(factors.residuals(probe.poses))
     if truncated_cost(probe_r, robust, d, q) >= to_beat.truncated_cost:
         return None, (report,)
-    decision = decide_outliers(
-        graph,
-        probe.poses,
-        robust,
-        solver_options,
-        gnc_options,
-        linear_solver,
-        factors,
-        on_stage,
-        on_iteration,
-        inliers,
-        start="chordal",
-    )
+    decision = context.decide(probe.poses, inliers, "chordal")
     return decision, (report, *decision.reports)

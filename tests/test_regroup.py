@@ -7,7 +7,7 @@ import numpy as np
 from egnc.api import solve
 from egnc.connectivity import connected_components
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import Decision, truncated_cost
+from egnc.decision import Decision, StartContext, truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions
 from egnc.kernels import chi2_quantile
@@ -73,12 +73,13 @@ def test_a_rejected_run_goes_back_in_together():
     poses = to_matrices(2, solve(graph.subgraph_edges(without), "l2").graph.poses)
     r = factors.whitened_norms(factors.residuals(poses))
     rejected = Decision(poses, without, (), True, truncated_cost(r, robust, 3, 0.99))
-    regrouped, reports = regrouped_decision(graph, robust, factors, rejected, SolverOptions(), GncOptions(), "scipy")
+    context = StartContext(graph, robust, factors, SolverOptions(), GncOptions(), "scipy")
+    regrouped, reports = regrouped_decision(context, rejected)
     assert regrouped is not None and reports and all(report.start == "regrouped" for report in reports)
     assert regrouped.inliers[run].all()
     assert regrouped.truncated_cost < rejected.truncated_cost
     nothing_rejected = Decision(poses, np.ones(graph.num_edges, dtype=bool), (), True, 0.0)
-    assert regrouped_decision(graph, robust, factors, nothing_rejected, SolverOptions(), GncOptions(), "scipy") == (
+    assert regrouped_decision(context, nothing_rejected) == (
         None,
         (),
     )
