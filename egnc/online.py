@@ -10,8 +10,8 @@ by the schedule's rule (`egnc.schedules`, DESIGN.md sections 3 and 7):
   strong-outlier threshold (chi-square 0.9); with `OnlineOptions.strong_at_arrival`, a new loop
   already past it at the current estimate starts at `mu = 1`.
 
-Each stage of the graduation is a warm-started IRLS solve of the whole current graph
-(`egnc.least_squares`), with the other loops at their own `mu`. After the last stage every loop's
+Each stage of the graduation is a warm-started IRLS solve (`egnc.least_squares`) of the poses
+around the change (below), with the other loops at their own `mu`. After the last stage every loop's
 `mu_init` is reset by its residual, as the reference implementations do after convergence: above
 the chi-square 0.9 quantile a loop starts at `mu = 1` the next time it is graduated (it stays
 switched off), below the 0.25 quantile at `mu = 0`. With `regraduate="reference"` (default) the
@@ -31,10 +31,16 @@ accepted loops, re-test, re-admission by innovation) on the current estimate.
 
 What an update costs follows what changed: new poses are placed by composing their odometry from
 the current estimate, so an update that only extends the trajectory leaves every residual
-at the optimum and solves nothing. An update with a loop closure builds the grown system's
-normal-equations pattern once, in pose-row order (CG solves it; no fill-reducing order is
-computed), analyses the preconditioner of the edges the map trusts (ordering and symbolic
-factorization, `egnc.step_solver`), and reuses both for all its stages.
+at the optimum and solves nothing. An update with a loop closure solves its stages on the poses
+within `OnlineOptions.region_hops` trusted edges of the new edges' ends, the poses around them
+held (`egnc.region`). It falls back to the whole map when the region's result is in doubt: when
+an older loop closure crossed the strong-outlier line in the local solve, the update is redone on
+the whole map from its start; when the region's boundary would still move (its poses' own Newton
+steps would lower the cost by more than `BOUNDARY_SHARE` of the update's tolerance), the last
+stage goes on over the whole map. A whole-map solve builds the grown system's normal-equations
+pattern in pose-row order (CG solves it; no fill-reducing order is computed) and analyses the
+preconditioner of the edges the map trusts (ordering and symbolic factorization,
+`egnc.step_solver`).
 
 Gauge: the pose of the first `add_prior` is held fixed at the prior's value (as `egnc.io.irl`
 does: the only absolute factor is satisfied exactly at the optimum, whatever its covariance);
@@ -68,6 +74,7 @@ from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, Solv
 from egnc.linear_solvers import resolve_name
 from egnc.losses import KernelLoss
 from egnc.mu_star import mu_star
+from egnc.region import LocalProblem, Neighbourhoods, block_jacobi_decrease
 from egnc.schedules import exceeds
 
 __all__ = ["ONLINE_METHODS", "OnlineOptions", "OnlineSolver", "UpdateReport"]
@@ -80,6 +87,15 @@ CHECKPOINT_VERSION = 1
 
 _RESIDUAL_AT_REST = 1e-9
 """A new edge whose whitened residual is below this at the current estimate changes no optimum."""
+
+WHOLE_MAP_SHARE = 0.5
+"""An update whose region holds more than this share of the poses solves the whole map instead."""
+
+BOUNDARY_SHARE = 1e-3
+"""A local update is finished on the whole map when its boundary poses' block-Jacobi decrease
+exceeds this share of the update's cost tolerance. The block-Jacobi decrease sees one pose at a
+time and so underestimates what the map's long, soft modes release (by up to 150x measured; the
+margin is in BENCHMARKS.md)."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +125,11 @@ class OnlineOptions:
         rel_cost_tol: the last stage of an update stops when an accepted step lowers the cost
             by at most this fraction (riSAM stops at 1e-2; docs/online.md says how the default
             was chosen).
+        region_hops: an update solves the poses within this many trusted edges of its new
+            edges' ends, with their other neighbours held (`egnc.region`), and falls back to the
+            whole map when an older loop crosses the strong-outlier line or the boundary would
+            still move (module docstring); a region of more than half the map, or None, solves
+            the whole map at every stage.
     """
 
     regraduate: Literal["reference", "new"] = "reference"
@@ -117,6 +138,7 @@ class OnlineOptions:
     stage_iterations: int | None = 1
     strong_at_arrival: bool = False
     rel_cost_tol: float = 1e-4
+    region_hops: int | None = 8
 
     def __post_init__(self) -> None:
         if self.regraduate not in ("reference", "new"):
@@ -127,6 +149,8 @@ class OnlineOptions:
             raise EgncError(f"rel_cost_tol must be in [0, 1), got {self.rel_cost_tol}")
         if self.stage_iterations is not None and self.stage_iterations < 1:
             raise EgncError(f"stage_iterations must be at least 1, got {self.stage_iterations}")
+        if self.region_hops is not None and (isinstance(self.region_hops, bool) or self.region_hops < 1):
+            raise EgncError(f"region_hops must be at least 1 or None, got {self.region_hops}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,7 +170,11 @@ class UpdateReport:
             each stage (what the next stage's `mu` was chosen from).
         iterations: accepted solver steps over the stages.
         time_s: wall time of the update in seconds.
-        reanalysed: whether the grown system was re-analysed (ordering and symbolic factorization).
+        reanalysed: whether the whole map's system was re-analysed (ordering and symbolic
+            factorization).
+        region_poses: poses the update solved as a local region (`egnc.region`); 0 when it
+            solved nothing or only the whole map.
+        whole_map: whether a stage solved the whole map (no region, or a fall-back from one).
         status: termination code of the last solve (`egnc.least_squares.STATUS_MESSAGES`); -1 when
             nothing was solved.
     """
@@ -163,6 +191,21 @@ class UpdateReport:
     time_s: float
     reanalysed: bool
     status: int
+    region_poses: int = 0
+    whole_map: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class _Graduation:
+    """What the stages of one update did (fields as in `UpdateReport`)."""
+
+    reports: tuple[StageReport, ...]
+    mu_history: np.ndarray
+    residual_history: np.ndarray
+    status: int
+    analysed: bool = False
+    region_poses: int = 0
+    whole_map: bool = False
 
 
 @dataclass
@@ -348,17 +391,17 @@ class OnlineSolver:
         added = self._current_factors().subset(new_edges)
         new_r = added.whitened_norms(added.residuals(self._T))
         self._r = np.concatenate((self._r[:num_old_edges], new_r))
-        needs_solve = prior_moved or len(new_loops) > 0 or bool(np.any(new_r > _RESIDUAL_AT_REST))
-        stages: tuple[StageReport, ...] = ()
-        history = residuals = np.zeros((0, len(new_loops)))
+        moving = new_edges[new_r > _RESIDUAL_AT_REST]
+        needs_solve = prior_moved or len(new_loops) > 0 or len(moving) > 0
         graduating = np.zeros(len(self._edges), dtype=bool)
-        reanalysed = False
-        status = -1
+        outcome = _Graduation((), np.zeros((0, len(new_loops))), np.zeros((0, len(new_loops))), -1)
         if needs_solve:
-            reanalysed = self._problem is None
             graduating = self._graduating(new_loops)
-            stages, history, residuals, status = self._graduate(graduating, new_loops)
+            # A moved gauge moves the whole map; otherwise the change starts at the ends of the new edges.
+            seeds = None if prior_moved else np.unique(self._edges[np.union1d(new_loops, moving)])
+            outcome = self._graduate(graduating, new_loops, seeds)
             self._reset_mu_init()
+        stages, status = outcome.reports, outcome.status
         report = UpdateReport(
             step=self._steps,
             new_poses=len(self._vertex_ids) - num_old_poses,
@@ -366,12 +409,14 @@ class OnlineSolver:
             new_loops=new_loops,
             graduated=int(graduating.sum()),
             stages=stages,
-            mu_history=history,
-            residual_history=residuals,
+            mu_history=outcome.mu_history,
+            residual_history=outcome.residual_history,
             iterations=sum(stage.iterations for stage in stages),
             time_s=time.perf_counter() - started,
-            reanalysed=reanalysed,
+            reanalysed=outcome.analysed,
             status=status,
+            region_poses=outcome.region_poses,
+            whole_map=outcome.whole_map,
         )
         if status >= 0:
             self._last_status = status
@@ -483,20 +528,65 @@ class OnlineSolver:
             graduating |= self._robust & (self._mu_init == 0.0)
         return graduating
 
-    def _graduate(
-        self, graduating: np.ndarray, new_loops: np.ndarray
-    ) -> tuple[tuple[StageReport, ...], np.ndarray, np.ndarray, int]:
-        """Run the stages of one update; returns the reports, the new loops' `mu` and `r` per stage, the status."""
-        problem = self._current_problem()
-        gnc = self.gnc_options
-        tight = replace(self.options, rel_cost_tol=max(self.options.rel_cost_tol, self.online_options.rel_cost_tol))
-        intermediate = tight
-        if self.online_options.stage_iterations is not None:
-            intermediate = replace(tight, max_iterations=self.online_options.stage_iterations)
+    def _graduate(self, graduating: np.ndarray, new_loops: np.ndarray, seeds: np.ndarray | None) -> _Graduation:
+        """Run the stages of one update around `seeds` (pose rows; None: the whole map)."""
         # One preconditioner for all stages of the update (one analysis): the edges whose weight is
         # at least trust_weight at its start, the new loops (at mu_init) included, so that CG has
         # only the switched-off loops left to resolve.
         trusted = KernelLoss(self._kernel, self._mu, self._robust).weight(self._r) >= self.options.trust_weight
+        hops = self.online_options.region_hops
+        local = neighbourhoods = None
+        if seeds is not None and hops is not None:
+            # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.of).
+            neighbourhoods = Neighbourhoods.of(self._edges, len(self._vertex_ids), trusted)
+            local = self._local_problem(neighbourhoods.within(seeds, hops), neighbourhoods)
+        if local is None or neighbourhoods is None:
+            analysed = self._problem is None
+            return replace(self._stages(None, graduating, new_loops, trusted), analysed=analysed, whole_map=True)
+        region_poses = int(local.free.sum())
+        before = self._T, self._r.copy(), self._mu.copy()
+        older = self._robust.copy()
+        older[new_loops] = False
+        was_far = exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+        in_region = replace(self._stages(local, graduating, new_loops, trusted), region_poses=region_poses)
+        if in_region.status == NUMERICAL_FAILURE:
+            return in_region
+        now_far = exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+        if np.any(older & (was_far != now_far)):
+            # The region moved an older loop across the strong-outlier line: held at its boundary, a
+            # region strains where the whole map would turn (egnc.region). Redo it on the whole map.
+            self._T, self._r, self._mu = before
+            analysed = self._problem is None
+            redone = self._stages(None, graduating, new_loops, trusted)
+            return replace(
+                redone,
+                reports=in_region.reports + redone.reports,
+                analysed=analysed,
+                region_poses=region_poses,
+                whole_map=True,
+            )
+        if self._boundary_strained(local, neighbourhoods):
+            # The region's boundary pulls on the rest: the whole map takes the last stage's steps
+            # from the local optimum.
+            analysed = self._problem is None
+            last = self._solve_stage(None, self._stage_options()[0], trusted)
+            return replace(
+                in_region, reports=in_region.reports + (last,), status=last.status, analysed=analysed, whole_map=True
+            )
+        return in_region
+
+    def _stage_options(self) -> tuple[SolverOptions, SolverOptions]:
+        """Options of the last stage (converged to `rel_cost_tol`) and of the stages before it."""
+        tight = replace(self.options, rel_cost_tol=max(self.options.rel_cost_tol, self.online_options.rel_cost_tol))
+        if self.online_options.stage_iterations is None:
+            return tight, tight
+        return tight, replace(tight, max_iterations=self.online_options.stage_iterations)
+
+    def _stages(
+        self, local: LocalProblem | None, graduating: np.ndarray, new_loops: np.ndarray, trusted: np.ndarray
+    ) -> _Graduation:
+        """Graduate the loops `graduating` from `mu_init` on `local` (None: the whole map)."""
+        tight, intermediate = self._stage_options()
         self._mu[graduating] = self._mu_init[graduating]
         active = graduating & (self._mu < 1.0)  # loops whose mu still moves this update
         strong = np.zeros(len(self._edges), dtype=bool)
@@ -504,38 +594,89 @@ class OnlineSolver:
         reports: list[StageReport] = []
         history: list[np.ndarray] = []
         residuals: list[np.ndarray] = []
-        status = 0
         while True:
             final = not np.any(active & (self._mu < 1.0))
-            started = time.perf_counter()
-            loss = KernelLoss(self._kernel, self._mu.copy(), self._robust)
-            solution = solve_least_squares(problem, self._T, loss, tight if final else intermediate, trusted=trusted)
-            self._T, self._r = solution.poses, solution.residual_norms
-            mu_loops = self._mu[self._robust]
-            reports.append(
-                StageReport(
-                    float(mu_loops.min(initial=np.nan)) if len(mu_loops) else np.nan,
-                    float(mu_loops.mean()) if len(mu_loops) else np.nan,
-                    float(mu_loops.max(initial=np.nan)) if len(mu_loops) else np.nan,
-                    iterations=solution.iterations,
-                    cost=solution.cost,
-                    time_s=time.perf_counter() - started,
-                    status=solution.status,
-                    active_edges=len(self._edges),
-                    cg_iterations=solution.linear.cg_iterations,
-                )
-            )
+            solution = self._solve_stage(local, tight if final else intermediate, trusted)
+            reports.append(solution)
             history.append(self._mu[new_loops].copy())
             residuals.append(self._r[new_loops].copy())
-            status = solution.status
-            if final or status == NUMERICAL_FAILURE:
+            if final or solution.status == NUMERICAL_FAILURE:
                 break
             stage_index += 1
             # EGNC's strong-outlier test uses the same chi-square 0.9 quantile as the mu_init reset.
-            strong |= active & exceeds(self._r, self.online_options.high_quantile, self._d, gnc.threshold)
+            strong |= active & exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
             self._mu[active] = self._next_mu(stage_index, active, strong)
         shape = (len(history), len(new_loops))
-        return tuple(reports), np.array(history).reshape(shape), np.array(residuals).reshape(shape), status
+        return _Graduation(
+            tuple(reports), np.array(history).reshape(shape), np.array(residuals).reshape(shape), reports[-1].status
+        )
+
+    def _solve_stage(self, local: LocalProblem | None, options: SolverOptions, trusted: np.ndarray) -> StageReport:
+        """One stage at the current `mu`: the local problem's poses, or the whole map (None)."""
+        started = time.perf_counter()
+        loss = KernelLoss(self._kernel, self._mu.copy(), self._robust)
+        if local is None:
+            solution = solve_least_squares(self._current_problem(), self._T, loss, options, trusted=trusted)
+            self._T, self._r = solution.poses, solution.residual_norms
+            cost = solution.cost
+        else:
+            edges = local.edges
+            # The stop rule of the whole map's solve: a decrease below rel_cost_tol of the whole cost.
+            whole_costs = loss.cost(self._r)
+            local_cost, whole_cost = float(np.sum(whole_costs[edges])), float(np.sum(whole_costs))
+            # A region is small: one factorization of all its edges beats CG's preconditioner analysis.
+            scaled = replace(
+                options,
+                rel_cost_tol=options.rel_cost_tol * whole_cost / max(local_cost, 1e-300),
+                linear_method="direct",
+            )
+            solution = solve_least_squares(
+                local.problem, self._T[local.rows], loss.subset(edges), scaled, trusted=trusted[edges]
+            )
+            T = self._T.copy()
+            T[local.rows] = solution.poses
+            self._T, self._r = T, self._r.copy()
+            self._r[edges] = solution.residual_norms
+            cost = whole_cost - local_cost + solution.cost
+        mu_loops = self._mu[self._robust]
+        return StageReport(
+            float(mu_loops.min(initial=np.nan)) if len(mu_loops) else np.nan,
+            float(mu_loops.mean()) if len(mu_loops) else np.nan,
+            float(mu_loops.max(initial=np.nan)) if len(mu_loops) else np.nan,
+            iterations=solution.iterations,
+            cost=cost,
+            time_s=time.perf_counter() - started,
+            status=solution.status,
+            active_edges=len(self._edges) if local is None else len(local.edges),
+            cg_iterations=solution.linear.cg_iterations,
+        )
+
+    def _local_problem(self, region: np.ndarray, neighbourhoods: Neighbourhoods) -> LocalProblem | None:
+        """The local problem of `region` (pose rows); None (the whole map) when it holds most of it."""
+        if len(region) > WHOLE_MAP_SHARE * len(self._vertex_ids):
+            return None
+        return LocalProblem.build(
+            region,
+            neighbourhoods,
+            self._current_factors(),
+            self._measurements,
+            self._T,
+            self._gauge,
+            self.linear_solver,
+        )
+
+    def _boundary_strained(self, local: LocalProblem, neighbourhoods: Neighbourhoods) -> bool:
+        """Whether the boundary poses' own Newton steps would lower the cost by more than
+        `BOUNDARY_SHARE` of the update's tolerance (`egnc.region.block_jacobi_decrease`)."""
+        boundary = local.boundary[local.boundary != self._gauge]
+        if not len(boundary):
+            return False
+        edges = neighbourhoods.edges_of(boundary)
+        loss = KernelLoss(self._kernel, self._mu, self._robust)
+        weights = loss.subset(edges).weight(self._r[edges])
+        decrease = block_jacobi_decrease(self._current_factors(), edges, self._T, weights, boundary)
+        tolerance = max(self.options.rel_cost_tol, self.online_options.rel_cost_tol) * float(np.sum(loss.cost(self._r)))
+        return float(decrease.sum()) > BOUNDARY_SHARE * tolerance
 
     def _next_mu(self, stage_index: int, active: np.ndarray, strong: np.ndarray) -> np.ndarray:
         """The `mu` of the `active` loops at stage `stage_index` >= 1 of an update."""

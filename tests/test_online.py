@@ -325,3 +325,72 @@ def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
     monkeypatch.undo()  # the real decision from the online estimate is right here: it is kept
     kept = solver.result()
     assert kept.start == "online" and kept.rejected_edges.tolist() == [false]
+
+
+def test_local_updates_reach_the_whole_map_estimate_and_solve_less():
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o")
+    outcomes, loop_updates = {}, []
+    for hops in (2, None):
+
+        def on_step(step, total, report, hops=hops):
+            if hops is not None and len(report.new_loops):
+                loop_updates.append((report.region_poses, report.whole_map, report.stages[0].active_edges))
+
+        outcomes[hops] = replay(graph, "egnc", online_options=OnlineOptions(region_hops=hops), on_step=on_step)
+    local, whole = outcomes[2].solver, outcomes[None].solver
+    # Loop updates start on a dozen of the 500 poses; on this small lattice most then fall back to
+    # the whole map, and more than a tenth finish in their region alone.
+    region_poses, whole_map, first_edges = np.array(loop_updates).T
+    assert np.median(region_poses) < 0.1 * graph.num_poses and np.median(first_edges) < 0.1 * graph.num_edges
+    assert 0.1 * len(whole_map) < np.count_nonzero(whole_map == 0) < len(whole_map)
+    np.testing.assert_allclose(to_matrices(2, local.poses), to_matrices(2, whole.poses), atol=5e-3)
+    np.testing.assert_allclose(local.residual_norms, whole.residual_norms, atol=0.02)
+    np.testing.assert_array_equal(local.inliers, whole.inliers)
+    np.testing.assert_array_equal(outcomes[2].result.inliers, outcomes[None].result.inliers)
+
+
+def test_region_hops_is_checked():
+    with pytest.raises(EgncError, match="region_hops"):
+        OnlineOptions(region_hops=0)
+
+
+def _chain_of_60(hops: int | None, odometry_information: float) -> OnlineSolver:
+    """Sixty poses 1 m apart along x, and a true loop 22 -> 40 (18 m); each update solved around its change."""
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(region_hops=hops))
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    for k in range(59):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1.0, 1.0, 10.0]) * odometry_information)
+    solver.update()
+    solver.add_loop(22, 40, [18.0, 0.0, 0.0], np.diag([100.0, 100.0, 400.0]))
+    solver.update()
+    return solver
+
+
+@pytest.mark.parametrize(
+    ("odometry_information", "measured", "loop_information", "redone"),
+    [(1000.0, 36.8, 100.0, False), (100.0, 35.0, 1e4, True)],
+)
+def test_a_region_that_would_strain_the_map_falls_back_to_the_whole_map(
+    odometry_information, measured, loop_information, redone
+):
+    # A loop 22 -> 59 that disagrees with the odometry (37 m): one hop around its ends cannot take it.
+    information = np.diag([1.0, 1.0, 4.0]) * loop_information
+    reports, poses = {}, {}
+    for hops in (1, None):
+        solver = _chain_of_60(hops, odometry_information)
+        solver.add_loop(22, 59, [measured, 0.0, 0.0], information)
+        reports[hops], poses[hops] = solver.update(), to_matrices(2, solver.poses)
+    local, whole = reports[1], reports[None]
+    # One trusted hop from 22 and 59: 21, 23, 40 (by the true loop) and 58.
+    assert local.region_poses == 6 and local.whole_map and local.stages[0].active_edges == 10
+    assert whole.region_poses == 0 and whole.whole_map and all(stage.active_edges == 61 for stage in whole.stages)
+    whole_map_stages = [stage for stage in local.stages if stage.active_edges == 61]
+    if redone:
+        # An older loop crossed the strong-outlier line in the region: the update was redone on
+        # the whole map from its start, so it ends exactly where the whole map's update does.
+        assert len(whole_map_stages) == len(whole.stages)
+        np.testing.assert_allclose(poses[1], poses[None], atol=1e-12)
+    else:
+        # The boundary still pulled on the rest: the whole map took the last stage on from the region's optimum.
+        assert len(whole_map_stages) == 1 and local.stages[-1].active_edges == 61
+        np.testing.assert_allclose(poses[1], poses[None], atol=1e-3)
