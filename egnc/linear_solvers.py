@@ -90,13 +90,14 @@ class LinearSolver(Protocol):
 
 
 def cholmod_available() -> bool:
-    """Whether scikit-sparse's CHOLMOD wrapper can be imported."""
-    return importlib.util.find_spec("sksparse") is not None
+    """Whether scikit-sparse's CHOLMOD wrapper can be imported (imported already, or found)."""
+    # find_spec searches the import path (0.25 ms), and every Problem resolves its backend.
+    return sys.modules.get("sksparse") is not None or importlib.util.find_spec("sksparse") is not None
 
 
 def rslab_available() -> bool:
-    """Whether the rslab package can be imported."""
-    return importlib.util.find_spec("rslab") is not None
+    """Whether the rslab package can be imported (imported already, or found)."""
+    return sys.modules.get("rslab") is not None or importlib.util.find_spec("rslab") is not None
 
 
 def resolve_name(name: str) -> Backend:
@@ -179,14 +180,19 @@ def _scipy_openblas_paths() -> tuple[str, ...]:
     return tuple(str(path) for path in candidates)
 
 
+USER_CHOSE_OPENBLAS_THREADS = "OPENBLAS_NUM_THREADS" in os.environ
+"""Whether `OPENBLAS_NUM_THREADS` was set when egnc was imported: OpenBLAS reads it once, when
+it loads, so a value set later (Dask's `LocalCluster` sets it in its parent) is nobody's choice."""
+
+
 def _openblas_thread_counts() -> list[tuple[Callable[[], int], Callable[[int], None]]]:
     """`(get, set)` of the thread count of each loaded OpenBLAS that egnc's backends call.
 
     CHOLMOD's (the system `libblas.so.3`, when it is OpenBLAS; looked up only once CHOLMOD is
     imported) and SciPy's bundled one (SuperLU's). None when the user chose a count with
-    `OPENBLAS_NUM_THREADS`.
+    `OPENBLAS_NUM_THREADS` (`USER_CHOSE_OPENBLAS_THREADS`).
     """
-    if "OPENBLAS_NUM_THREADS" in os.environ:
+    if USER_CHOSE_OPENBLAS_THREADS:
         return []
     system = _loaded_library("libblas.so.3") if _CHOLMOD_MODULE in sys.modules else None
     counts = []

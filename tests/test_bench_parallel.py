@@ -102,9 +102,8 @@ def cluster():
     """Two single-threaded worker processes on the loopback address.
 
     LocalCluster leaves `OPENBLAS_NUM_THREADS=1` (and OMP, MKL) in this process's environment for
-    its workers; it is restored afterwards, since egnc reads that variable as the user's choice of
-    BLAS threads (`egnc.linear_solvers.serial_native_threads`) and later tests compare solves bit
-    for bit.
+    its workers; it is restored afterwards, so that nothing after it runs in another environment
+    (egnc itself reads that variable only at import: `USER_CHOSE_OPENBLAS_THREADS`).
     """
     distributed = pytest.importorskip("distributed")
     saved = dict(os.environ)

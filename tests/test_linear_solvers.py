@@ -146,7 +146,7 @@ needs_scipy_openblas = pytest.mark.skipif(
 
 @needs_scipy_openblas
 def test_serial_native_threads_runs_scipys_openblas_on_one_thread_and_restores_its_count(monkeypatch):
-    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    monkeypatch.setattr(linear_solvers, "USER_CHOSE_OPENBLAS_THREADS", False)
     library = linear_solvers._scipy_openblas()
     before = library.scipy_openblas_get_num_threads()
     library.scipy_openblas_set_num_threads(2)
@@ -154,7 +154,12 @@ def test_serial_native_threads_runs_scipys_openblas_on_one_thread_and_restores_i
         with linear_solvers.serial_native_threads():
             assert library.scipy_openblas_get_num_threads() == 1
         assert library.scipy_openblas_get_num_threads() == 2
-        monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")  # the user's choice is left alone
+        # A count set after egnc's import (as Dask's LocalCluster does) is nobody's choice ...
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+        with linear_solvers.serial_native_threads():
+            assert library.scipy_openblas_get_num_threads() == 1
+        # ... one set before it is the user's, and left alone.
+        monkeypatch.setattr(linear_solvers, "USER_CHOSE_OPENBLAS_THREADS", True)
         with linear_solvers.serial_native_threads():
             assert library.scipy_openblas_get_num_threads() == 2
     finally:
@@ -165,7 +170,7 @@ def test_serial_native_threads_runs_scipys_openblas_on_one_thread_and_restores_i
 def test_superlu_factorizes_and_solves_on_one_openblas_thread(monkeypatch):
     import scipy.sparse.linalg
 
-    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    monkeypatch.setattr(linear_solvers, "USER_CHOSE_OPENBLAS_THREADS", False)
     library = linear_solvers._scipy_openblas()
     seen = []
 
