@@ -24,8 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from egnc.factors import BetweenFactors, from_matrices
 from egnc.graph import PoseGraph
@@ -37,15 +35,17 @@ __all__ = ["LocalProblem", "Neighbourhoods", "block_jacobi_decrease"]
 
 @dataclass(frozen=True, eq=False)
 class Neighbourhoods:
-    """Which poses and edges are near which: built once per set of edges.
+    """Which poses and edges are near which.
 
     Attributes:
-        adjacency: `(N, N)` CSR, 1 where a hop edge joins two poses.
-        incidence: `(N, E)` CSR, 1 where a pose is an end of an edge (any edge).
+        edges: `(E, 2)` pose rows of every edge.
+        hop_edges: `(H, 2)` pose rows of the edges a hop may take.
+        num_poses: number of poses `N`.
     """
 
-    adjacency: sp.csr_matrix
-    incidence: sp.csr_matrix
+    edges: np.ndarray
+    hop_edges: np.ndarray
+    num_poses: int
 
     @classmethod
     def of(cls, edges: np.ndarray, num_poses: int, hops_along: np.ndarray | None = None) -> Neighbourhoods:
@@ -55,26 +55,25 @@ class Neighbourhoods:
         map has switched off moves nothing, and random false loops would make every pose a few
         hops from every other.
         """
-        num_edges = len(edges)
-        ends = edges.T.ravel()
-        edge_index = np.tile(np.arange(num_edges), 2)
-        incidence = sp.csr_matrix((np.ones(2 * num_edges), (ends, edge_index)), shape=(num_poses, num_edges))
-        hop_edges = edges if hops_along is None else edges[hops_along]
-        ends, other = hop_edges.T.ravel(), hop_edges[:, ::-1].T.ravel()
-        adjacency = sp.csr_matrix((np.ones(len(ends)), (ends, other)), shape=(num_poses, num_poses))
-        adjacency.data[:] = 1.0  # parallel edges count as one hop
-        return cls(adjacency, incidence)
+        return cls(edges, edges if hops_along is None else edges[hops_along], num_poses)
 
     def within(self, seeds: np.ndarray, hops: int) -> np.ndarray:
         """Sorted rows of the poses at most `hops` edges from a pose of `seeds` (the seeds included)."""
-        if hops == 0:
-            return np.unique(seeds)
-        distance = dijkstra(self.adjacency, directed=False, indices=np.unique(seeds), limit=hops + 0.5, min_only=True)
-        return np.flatnonzero(np.isfinite(distance))
+        inside = np.zeros(self.num_poses, dtype=bool)
+        inside[seeds] = True
+        for _ in range(hops):
+            # One vectorized pass over the edges per hop: no per-pose Python.
+            reached = self.hop_edges[inside[self.hop_edges].any(axis=1)]
+            if inside[reached].all():
+                break
+            inside[reached] = True
+        return np.flatnonzero(inside)
 
     def edges_of(self, rows: np.ndarray) -> np.ndarray:
         """Sorted indices of the edges with at least one end among the poses `rows`."""
-        return np.unique(self.incidence[rows].indices)
+        among = np.zeros(self.num_poses, dtype=bool)
+        among[rows] = True
+        return np.flatnonzero(among[self.edges].any(axis=1))
 
 
 @dataclass(frozen=True, eq=False)
