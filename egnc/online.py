@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Literal
@@ -206,6 +207,7 @@ class _Graduation:
     analysed: bool = False
     region_poses: int = 0
     whole_map: bool = False
+    doubtful: bool = False
 
 
 @dataclass
@@ -545,16 +547,20 @@ class OnlineSolver:
             return replace(self._stages(None, graduating, new_loops, trusted), analysed=analysed, whole_map=True)
         region_poses = int(local.free.sum())
         before = self._T, self._r.copy(), self._mu.copy()
-        older = self._robust.copy()
-        older[new_loops] = False
+        # A region decides nothing alone: a loop that crosses the strong-outlier line in it (an
+        # older one either way, a new one outwards) is judged on the whole map instead. Held at
+        # its boundary, a region strains where the whole map would turn (egnc.region).
         was_far = exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
-        in_region = replace(self._stages(local, graduating, new_loops, trusted), region_poses=region_poses)
+        was_far[new_loops] = False
+
+        def doubtful() -> bool:
+            far = exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+            return bool(np.any(self._robust & (far != was_far)))
+
+        in_region = replace(self._stages(local, graduating, new_loops, trusted, doubtful), region_poses=region_poses)
         if in_region.status == NUMERICAL_FAILURE:
             return in_region
-        now_far = exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
-        if np.any(older & (was_far != now_far)):
-            # The region moved an older loop across the strong-outlier line: held at its boundary, a
-            # region strains where the whole map would turn (egnc.region). Redo it on the whole map.
+        if in_region.doubtful:
             self._T, self._r, self._mu = before
             analysed = self._problem is None
             redone = self._stages(None, graduating, new_loops, trusted)
@@ -583,9 +589,18 @@ class OnlineSolver:
         return tight, replace(tight, max_iterations=self.online_options.stage_iterations)
 
     def _stages(
-        self, local: LocalProblem | None, graduating: np.ndarray, new_loops: np.ndarray, trusted: np.ndarray
+        self,
+        local: LocalProblem | None,
+        graduating: np.ndarray,
+        new_loops: np.ndarray,
+        trusted: np.ndarray,
+        doubtful: Callable[[], bool] | None = None,
     ) -> _Graduation:
-        """Graduate the loops `graduating` from `mu_init` on `local` (None: the whole map)."""
+        """Graduate the loops `graduating` from `mu_init` on `local` (None: the whole map).
+
+        `doubtful`: asked after each stage; when it answers True the stages stop there, and the
+        result says so (`_Graduation.doubtful`).
+        """
         tight, intermediate = self._stage_options()
         self._mu[graduating] = self._mu_init[graduating]
         active = graduating & (self._mu < 1.0)  # loops whose mu still moves this update
@@ -602,13 +617,19 @@ class OnlineSolver:
             residuals.append(self._r[new_loops].copy())
             if final or solution.status == NUMERICAL_FAILURE:
                 break
+            if doubtful is not None and doubtful():
+                return _Graduation(tuple(reports), np.zeros((0, 0)), np.zeros((0, 0)), solution.status, doubtful=True)
             stage_index += 1
             # EGNC's strong-outlier test uses the same chi-square 0.9 quantile as the mu_init reset.
             strong |= active & exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
             self._mu[active] = self._next_mu(stage_index, active, strong)
         shape = (len(history), len(new_loops))
         return _Graduation(
-            tuple(reports), np.array(history).reshape(shape), np.array(residuals).reshape(shape), reports[-1].status
+            tuple(reports),
+            np.array(history).reshape(shape),
+            np.array(residuals).reshape(shape),
+            reports[-1].status,
+            doubtful=doubtful is not None and doubtful(),
         )
 
     def _solve_stage(self, local: LocalProblem | None, options: SolverOptions, trusted: np.ndarray) -> StageReport:

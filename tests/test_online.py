@@ -330,23 +330,24 @@ def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
 def test_local_updates_reach_the_whole_map_estimate_and_solve_less():
     graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o")
     outcomes, loop_updates = {}, []
-    for hops in (2, None):
+    for hops in (8, None):
 
         def on_step(step, total, report, hops=hops):
             if hops is not None and len(report.new_loops):
                 loop_updates.append((report.region_poses, report.whole_map, report.stages[0].active_edges))
 
         outcomes[hops] = replay(graph, "egnc", online_options=OnlineOptions(region_hops=hops), on_step=on_step)
-    local, whole = outcomes[2].solver, outcomes[None].solver
-    # Loop updates start on a dozen of the 500 poses; on this small lattice most then fall back to
-    # the whole map, and more than a tenth finish in their region alone.
+    local, whole = outcomes[8].solver, outcomes[None].solver
+    # Loop updates start on a region of the 500 poses; on this small lattice most are then judged
+    # on the whole map (a loop crossed the strong-outlier line, or the boundary pulled), and more
+    # than a fifth finish in their region alone.
     region_poses, whole_map, first_edges = np.array(loop_updates).T
-    assert np.median(region_poses) < 0.1 * graph.num_poses and np.median(first_edges) < 0.1 * graph.num_edges
-    assert 0.1 * len(whole_map) < np.count_nonzero(whole_map == 0) < len(whole_map)
-    np.testing.assert_allclose(to_matrices(2, local.poses), to_matrices(2, whole.poses), atol=5e-3)
-    np.testing.assert_allclose(local.residual_norms, whole.residual_norms, atol=0.02)
+    assert np.median(region_poses) < 0.2 * graph.num_poses and np.median(first_edges) < 0.3 * graph.num_edges
+    assert 0.2 * len(whole_map) < np.count_nonzero(whole_map == 0) < len(whole_map)
+    np.testing.assert_allclose(to_matrices(2, local.poses), to_matrices(2, whole.poses), atol=1e-6)
+    np.testing.assert_allclose(local.residual_norms, whole.residual_norms, atol=1e-5)
     np.testing.assert_array_equal(local.inliers, whole.inliers)
-    np.testing.assert_array_equal(outcomes[2].result.inliers, outcomes[None].result.inliers)
+    np.testing.assert_array_equal(outcomes[8].result.inliers, outcomes[None].result.inliers)
 
 
 def test_region_hops_is_checked():
