@@ -103,12 +103,27 @@ def test_online_replay_of_a_g2o_file_keeps_file_edge_order(tmp_path):
     [
         (["--online", "--method", "gnc-gm"], "--online replays"),
         (["--checkpoint", "x.npz"], "add --online"),
+        (["--region-hops", "4"], "add --online"),
         (["--online", "--init", "chordal"], "--init does not apply"),
     ],
 )
 def test_options_that_cannot_apply_are_refused(options, message):
     run = egnc_solve(DATASETS / "grid2d.g2o", *options)
     assert run.returncode == 1 and message in run.stderr
+
+
+def test_region_hops_zero_solves_every_loop_update_on_the_whole_map(tmp_path):
+    reports = {}
+    for hops in ("0", "8"):
+        reports[hops] = tmp_path / f"hops{hops}.json"
+        run = egnc_solve(
+            DATASETS / "grid2d_outliers.g2o", "--online", "--region-hops", hops, "--report", reports[hops], "-q"
+        )
+        assert run.returncode == 0, run.stderr
+    whole, local = (json.loads(reports[hops].read_text()) for hops in ("0", "8"))
+    assert whole["rejected_edges"] == local["rejected_edges"]
+    # Every loop update of the whole map takes its steps over all poses; regions take others too.
+    assert whole["online"]["iterations"] != local["online"]["iterations"]
 
 
 def _run_until(args: list[str | Path], kill_at_step: int) -> int:

@@ -37,7 +37,7 @@ from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.linear_solvers import LINEAR_SOLVERS, resolve_name
-from egnc.online import ONLINE_METHODS
+from egnc.online import ONLINE_METHODS, OnlineOptions
 from egnc.replay import latency_summary, replay
 from egnc.step_solver import LINEAR_METHODS
 
@@ -159,6 +159,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="with --checkpoint: steps between two saves (default 50; one more after the last step)",
     )
+    parser.add_argument(
+        "--region-hops",
+        type=int_at_least(0),
+        metavar="N",
+        help="with --online: solve each loop update first on the poses within N trusted edges of its new"
+        " edges, falling back to the whole map when in doubt (default 8; 0: always the whole map)",
+    )
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument(
         "--plot",
@@ -262,6 +269,8 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
         online = None
         if args.online:
+            hops = args.region_hops
+            online_options = None if hops is None else OnlineOptions(region_hops=hops or None)
             outcome = replay(
                 graph,
                 args.method,
@@ -270,6 +279,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
                 options=options,
                 checkpoint=args.checkpoint,
                 checkpoint_every=args.checkpoint_every,
+                online_options=online_options,
                 on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
             )
             result = outcome.result
@@ -310,6 +320,8 @@ def _check_options(args: argparse.Namespace) -> None:
         raise EgncError("--online places every new pose by composing its odometry: --init does not apply")
     if not args.online and args.checkpoint is not None:
         raise EgncError("--checkpoint saves the state of an --online replay: add --online")
+    if not args.online and args.region_hops is not None:
+        raise EgncError("--region-hops sets how an --online update solves: add --online")
     if is_irl(args.input) and (args.skip_unknown or args.information != "strict"):
         raise EgncError("--skip-unknown and --information apply to g2o files, not to IRL logs")
 
