@@ -34,10 +34,11 @@ the current estimate, so an update that only extends the trajectory leaves every
 at the optimum and solves nothing. An update with a loop closure solves its stages on the poses
 within `OnlineOptions.region_hops` trusted edges of the new edges' ends, the poses around them
 held (`egnc.region`). It falls back to the whole map when the region's result is in doubt: when
-an older loop closure crossed the strong-outlier line in the local solve, the update is redone on
-the whole map from its start; when the region's boundary would still move (its poses' own Newton
-steps would lower the cost by more than `BOUNDARY_SHARE` of the update's tolerance), the last
-stage goes on over the whole map. A whole-map solve builds the grown system's normal-equations
+a loop closure crosses the strong-outlier line in the region (an older one either way, a new one
+outwards; checked after every stage), the update stops and is redone on the whole map from its
+start; when the region's boundary would still move (its poses' own Newton steps would lower the
+cost by more than `BOUNDARY_SHARE` of the update's tolerance), the last stage goes on over the
+whole map. A whole-map solve builds the grown system's normal-equations
 pattern in pose-row order (CG solves it; no fill-reducing order is computed) and analyses the
 preconditioner of the edges the map trusts (ordering and symbolic factorization,
 `egnc.step_solver`).
@@ -128,8 +129,8 @@ class OnlineOptions:
             was chosen).
         region_hops: an update solves the poses within this many trusted edges of its new
             edges' ends, with their other neighbours held (`egnc.region`), and falls back to the
-            whole map when an older loop crosses the strong-outlier line or the boundary would
-            still move (module docstring); a region of more than half the map, or None, solves
+            whole map when a loop crosses the strong-outlier line in the region or its boundary
+            would still move (module docstring); a region of more than half the map, or None, solves
             the whole map at every stage.
     """
 

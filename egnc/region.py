@@ -10,8 +10,9 @@ nothing else moves.
 
 A region held at its boundary is stiffer than the map: where the whole map would turn a part of
 itself, the region strains. Two tests tell when that matters (the caller, `egnc.online`, falls
-back to the whole map on either): an older loop closure crossed the strong-outlier line in the
-local solve (the strain changed a decision), or the boundary still pulls on the rest of the map.
+back to the whole map on either): a loop closure crossed the strong-outlier line in the local
+solve (the strain may have made a decision the whole map would not), or the boundary still
+pulls on the rest of the map.
 The second is measured by each boundary pose's block-Jacobi decrease: the cost decrease
 `0.5 g_b^T H_bb^-1 g_b` its own Newton step would bring with every other pose held, from its
 gradient `g_b` and diagonal block `H_bb` over all its edges. One pose at a time underestimates
