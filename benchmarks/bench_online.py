@@ -2,7 +2,7 @@
 
     python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
-        [--regraduate reference|new] [--region-hops 8] [--strong-at-arrival] [--rel-cost-tol TOL] [--linear-solver auto]
+        [--regraduate reference|new] [--region-hops N] [--strong-at-arrival] [--rel-cost-tol TOL] [--linear-solver auto]
         [--json results.jsonl]
 
 For every dataset and percentage, the clean graph's least-squares optimum is the reference; the
@@ -126,7 +126,7 @@ def main() -> int:
     parser.add_argument("--methods", default="egnc,risam")
     parser.add_argument("--irl", default="manhattan_noisy", help="IRL logs (names in the datasets folder); '' for none")
     parser.add_argument("--stage-iterations", type=int, default=1, help="0: every stage converges")
-    parser.add_argument("--region-hops", type=int, default=8, help="OnlineOptions.region_hops; 0: the whole map")
+    parser.add_argument("--region-hops", type=int, default=0, help="OnlineOptions.region_hops; 0: the whole map")
     parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
     parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
     parser.add_argument(

@@ -10,18 +10,18 @@ by the schedule's rule (`egnc.schedules`, DESIGN.md sections 3 and 7):
   strong-outlier threshold (chi-square 0.9); with `OnlineOptions.strong_at_arrival`, a new loop
   already past it at the current estimate starts at `mu = 1`.
 
-Each stage of the graduation is a warm-started IRLS solve (`egnc.least_squares`) of the poses
-around the change (below), with the other loops at their own `mu`. After the last stage every loop's
-`mu_init` is reset by its residual, as the reference implementations do after convergence: above
-the chi-square 0.9 quantile a loop starts at `mu = 1` the next time it is graduated (it stays
-switched off), below the 0.25 quantile at `mu = 0`. With `regraduate="reference"` (default) the
-next update that brings loop closures graduates, with the new loops, every older loop whose
-`mu_init` is 0, as riSAM re-graduates the loops its update touches: the loops that fit are then
-quadratic again while a new loop is weighed, and hold the map against it. With `"new"` only the
-new loops graduate and the older ones keep `mu = 1`; their Geman-McClure weights give way when a
-false loop bends the map at its `mu = 0` stage. Measured (BENCHMARKS.md): the same decisions and
-5 to 30 % fewer iterations on CSAIL, Intel and manhattan_noisy.irl, but on manhattanOlson3500 with
-30 % false loops precision 0.88 and ATE 27.6 m against 0.993 and 0.30 m.
+Each stage of the graduation is a warm-started IRLS solve (`egnc.least_squares`) of the whole
+current graph, or of the poses around the change (below), with the other loops at their own `mu`.
+After the last stage every loop's `mu_init` is reset by its residual, as the reference
+implementations do after convergence: above the chi-square 0.9 quantile a loop starts at `mu = 1`
+the next time it is graduated (it stays switched off), below the 0.25 quantile at `mu = 0`. With
+`regraduate="reference"` (default) the next update that brings loop closures graduates, with the new
+loops, every older loop whose `mu_init` is 0, as riSAM re-graduates the loops its update touches:
+the loops that fit are then quadratic again while a new loop is weighed, and hold the map against
+it. With `"new"` only the new loops graduate and the older ones keep `mu = 1`; their Geman-McClure
+weights give way when a false loop bends the map at its `mu = 0` stage. Measured (BENCHMARKS.md):
+the same decisions and 5 to 30 % fewer iterations on CSAIL, Intel and manhattan_noisy.irl, but on
+manhattanOlson3500 with 30 % false loops precision 0.88 and ATE 27.6 m against 0.993 and 0.30 m.
 
 Every loop stays in every solve with its IRLS weight, so a loop rejected early comes back when
 later evidence pulls the map towards it (its Geman-McClure weight grows as its residual falls,
@@ -31,17 +31,17 @@ accepted loops, re-test, re-admission by innovation) on the current estimate.
 
 What an update costs follows what changed: new poses are placed by composing their odometry from
 the current estimate, so an update that only extends the trajectory leaves every residual
-at the optimum and solves nothing. An update with a loop closure solves its stages on the poses
-within `OnlineOptions.region_hops` trusted edges of the new edges' ends, the poses around them
-held (`egnc.region`). It falls back to the whole map when the region's result is in doubt: when
-a loop closure crosses the strong-outlier line in the region (an older one either way, a new one
-outwards; checked after every stage), the update stops and is redone on the whole map from its
-start; when the region's boundary would still move (its poses' own Newton steps would lower the
-cost by more than `BOUNDARY_SHARE` of the update's tolerance), the last stage goes on over the
-whole map. A whole-map solve builds the grown system's normal-equations
-pattern in pose-row order (CG solves it; no fill-reducing order is computed) and analyses the
-preconditioner of the edges the map trusts (ordering and symbolic factorization,
-`egnc.step_solver`).
+at the optimum and solves nothing. An update with a loop closure solves the whole map. With
+`OnlineOptions.region_hops` it first solves the poses within that many trusted edges of the new
+edges' ends, the poses around them held (`egnc.region`), and falls back to the whole map when
+the region's result is in doubt: when a loop closure crosses the strong-outlier line in the
+region (an older one either way, a new one outwards; checked after every stage), the update
+stops and is redone on the whole map from its start; when the region's boundary would still
+move (its poses' own Newton steps would lower the cost by more than `BOUNDARY_SHARE` of the
+update's tolerance), the last stage goes on over the whole map. A whole-map solve builds the
+grown system's normal-equations pattern in pose-row order (CG solves it; no fill-reducing order
+is computed) and analyses the preconditioner of the edges the map trusts (ordering and symbolic
+factorization, `egnc.step_solver`).
 
 Gauge: the pose of the first `add_prior` is held fixed at the prior's value (as `egnc.io.irl`
 does: the only absolute factor is satisfied exactly at the optimum, whatever its covariance);
@@ -127,11 +127,12 @@ class OnlineOptions:
         rel_cost_tol: the last stage of an update stops when an accepted step lowers the cost
             by at most this fraction (riSAM stops at 1e-2; docs/online.md says how the default
             was chosen).
-        region_hops: an update solves the poses within this many trusted edges of its new
-            edges' ends, with their other neighbours held (`egnc.region`), and falls back to the
-            whole map when a loop crosses the strong-outlier line in the region or its boundary
-            would still move (module docstring); a region of more than half the map, or None, solves
-            the whole map at every stage.
+        region_hops: None (default): every update solves the whole map. N: an update first
+            solves the poses within N trusted edges of its new edges' ends, with their other
+            neighbours held (`egnc.region`), and falls back to the whole map when a loop crosses
+            the strong-outlier line in the region or its boundary would still move (module
+            docstring); faster on large maps, but its running estimate can part from the whole
+            map's (docs/online.md).
     """
 
     regraduate: Literal["reference", "new"] = "reference"
@@ -140,7 +141,7 @@ class OnlineOptions:
     stage_iterations: int | None = 1
     strong_at_arrival: bool = False
     rel_cost_tol: float = 1e-4
-    region_hops: int | None = 8
+    region_hops: int | None = None
 
     def __post_init__(self) -> None:
         if self.regraduate not in ("reference", "new"):

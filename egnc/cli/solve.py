@@ -164,7 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_at_least(0),
         metavar="N",
         help="with --online: solve each loop update first on the poses within N trusted edges of its new"
-        " edges, falling back to the whole map when in doubt (default 8; 0: always the whole map)",
+        " edges, falling back to the whole map when in doubt (default, or 0: always the whole map)",
     )
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument(
