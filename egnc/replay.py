@@ -123,6 +123,8 @@ def replay(
     settings = {
         "fingerprint": fingerprint(graph, known),
         "method": method,
+        # A resumed run keeps its checkpoint's options; one asked to solve otherwise is refused.
+        "region_hops": (online_options or OnlineOptions()).region_hops,
     }
     solver: OnlineSolver | None = None
     done = 0
@@ -130,7 +132,9 @@ def replay(
     if path is not None and path.exists():
         solver, meta = OnlineSolver.load(path)
         if {key: meta.get(key) for key in settings} != settings:
-            raise EgncError(f"{path}: the checkpoint belongs to another graph or method; remove it or choose another")
+            raise EgncError(
+                f"{path}: the checkpoint belongs to another graph, method or region_hops; remove it or choose another"
+            )
         done = int(meta["steps_done"])
     if solver is None:
         solver = OnlineSolver(

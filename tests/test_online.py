@@ -258,6 +258,8 @@ def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path):
     np.testing.assert_array_equal(resumed.update_iterations, whole.update_iterations)
     with pytest.raises(EgncError, match="another graph"):
         replay(graph, "risam", checkpoint=path)
+    with pytest.raises(EgncError, match="region_hops"):
+        replay(graph, "egnc", checkpoint=path, online_options=OnlineOptions(region_hops=8))
 
 
 def test_save_and_load_keep_every_number(tmp_path):
