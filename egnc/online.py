@@ -95,9 +95,8 @@ WHOLE_MAP_SHARE = 0.5
 
 BOUNDARY_SHARE = 1e-3
 """A local update is finished on the whole map when its boundary poses' block-Jacobi decrease
-exceeds this share of the update's cost tolerance. The block-Jacobi decrease sees one pose at a
-time and so underestimates what the map's long, soft modes release (by up to 150x measured; the
-margin is in BENCHMARKS.md)."""
+exceeds this share of the update's cost tolerance: one pose at a time underestimates what the
+map's long, soft modes release (docs/online.md)."""
 
 
 @dataclass(frozen=True)
