@@ -551,12 +551,11 @@ class OnlineSolver:
         # A region decides nothing alone: a loop that crosses the strong-outlier line in it (an
         # older one either way, a new one outwards) is judged on the whole map instead. Held at
         # its boundary, a region strains where the whole map would turn (egnc.region).
-        was_far = exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+        was_far = self._far()
         was_far[new_loops] = False
 
         def doubtful() -> bool:
-            far = exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
-            return bool(np.any(self._robust & (far != was_far)))
+            return bool(np.any(self._robust & (self._far() != was_far)))
 
         in_region = replace(self._stages(local, graduating, new_loops, trusted, doubtful), region_poses=region_poses)
         if in_region.status == NUMERICAL_FAILURE:
@@ -581,6 +580,10 @@ class OnlineSolver:
                 in_region, reports=in_region.reports + (last,), status=last.status, analysed=analysed, whole_map=True
             )
         return in_region
+
+    def _far(self) -> np.ndarray:
+        """`(E,)` bool: edges whose current residual is past the strong-outlier line (`high_quantile`)."""
+        return exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
 
     def _stage_options(self) -> tuple[SolverOptions, SolverOptions]:
         """Options of the last stage (converged to `rel_cost_tol`) and of the stages before it."""
@@ -622,7 +625,7 @@ class OnlineSolver:
                 return _Graduation(tuple(reports), np.zeros((0, 0)), np.zeros((0, 0)), solution.status, doubtful=True)
             stage_index += 1
             # EGNC's strong-outlier test uses the same chi-square 0.9 quantile as the mu_init reset.
-            strong |= active & exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+            strong |= active & self._far()
             self._mu[active] = self._next_mu(stage_index, active, strong)
         shape = (len(history), len(new_loops))
         return _Graduation(
@@ -697,7 +700,7 @@ class OnlineSolver:
         loss = KernelLoss(self._kernel, self._mu, self._robust)
         weights = loss.subset(edges).weight(self._r[edges])
         decrease = block_jacobi_decrease(self._current_factors(), edges, self._T, weights, boundary)
-        tolerance = max(self.options.rel_cost_tol, self.online_options.rel_cost_tol) * float(np.sum(loss.cost(self._r)))
+        tolerance = self._stage_options()[0].rel_cost_tol * float(np.sum(loss.cost(self._r)))
         return float(decrease.sum()) > BOUNDARY_SHARE * tolerance
 
     def _next_mu(self, stage_index: int, active: np.ndarray, strong: np.ndarray) -> np.ndarray:
@@ -717,9 +720,8 @@ class OnlineSolver:
 
     def _reset_mu_init(self) -> None:
         """After convergence: loops far off start at `mu = 1` next time, loops that fit at `mu = 0`."""
-        convention = self.gnc_options.threshold
-        high = self._robust & exceeds(self._r, self.online_options.high_quantile, self._d, convention)
-        low = self._robust & ~exceeds(self._r, self.online_options.low_quantile, self._d, convention)
+        high = self._robust & self._far()
+        low = self._robust & ~exceeds(self._r, self.online_options.low_quantile, self._d, self.gnc_options.threshold)
         self._mu_init[high] = 1.0
         self._mu_init[low] = 0.0
 
