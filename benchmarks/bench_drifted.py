@@ -11,8 +11,8 @@ reaches, relative to the least-squares optimum (the lower of `l2` from the guess
 chordal initialization):
 
 - `egnc`: the default (`egnc.solve`), with its other starts (`GncOptions.chordal_start`,
-  `regroup_start`, `elimination_start`);
-- `guess only`: the default before them (all three off);
+  `chordal_all_start`, `regroup_start`, `elimination_start`);
+- `guess only`: the default before them (all four off);
 - `gtsam-gnc-tls`: GTSAM's GncLMOptimizer (TLS, known inliers = odometry), rejected = loops whose
   `r^2 > chi2.ppf(0.99, d)` at its solution (its own inlier rule); `gtsam-lm`: GTSAM's LM from the
   same guess, over every edge.
@@ -76,7 +76,8 @@ def drifted(graph: PoseGraph, kind: str, level: float, seed: int) -> PoseGraph:
 
 def solve_egnc(graph: PoseGraph, method: str, init: str, other_starts: bool) -> dict:
     """One egnc solve (child process): rejected loops, all-edge cost, start, time, warnings."""
-    starts = {"chordal_start": other_starts, "regroup_start": other_starts, "elimination_start": other_starts}
+    names = ("chordal_start", "chordal_all_start", "regroup_start", "elimination_start")
+    starts = {name: other_starts for name in names}
     result = egnc.solve(graph, method, init=init, gnc_options=GncOptions(**starts))
     return {
         "rejected": len(result.rejected_edges),

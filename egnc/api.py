@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import TypedDict
 
@@ -19,8 +20,10 @@ from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.gnc import (
     GncOptions,
+    GncOutcome,
     StageCallback,
     StageReport,
+    StageStart,
     classify_inliers,
     iteration_limited,
     known_inlier_mask,
@@ -42,7 +45,7 @@ from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
 from egnc.regroup import regrouped_decision
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
-from egnc.starts import chordal_decision
+from egnc.starts import all_edges_decision, chordal_decision
 
 __all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
 
@@ -51,6 +54,7 @@ INITIALIZATIONS = ("file", "odometry", "chordal")
 
 _START_NAMES = {
     "chordal": "chordal initialization",
+    "chordal-all": "GNC stage run again from the chordal initialization of every edge",
     "regrouped": "rejected runs of loop closures put back together",
     "elimination": "backward elimination over every edge",
 }
@@ -96,10 +100,11 @@ class Result:
         init: the initial guess used (`INITIALIZATIONS`).
         start: where the decision that was kept started: `"guess"` (the GNC solve from `init`),
             `"chordal"` (the chordal initialization, kept for its lower truncated cost;
-            `GncOptions.chordal_start`), `"regrouped"` (rejected runs of loops put back together;
-            `GncOptions.regroup_start`), `"elimination"` (backward elimination from least squares
-            over every edge; `GncOptions.elimination_start`) or `"online"`
-            (`egnc.online.OnlineSolver`'s estimate).
+            `GncOptions.chordal_start`), `"chordal-all"` (the GNC stage run again from the chordal
+            initialization of every edge; `GncOptions.chordal_all_start`), `"regrouped"`
+            (rejected runs of loops put back together; `GncOptions.regroup_start`),
+            `"elimination"` (backward elimination from least squares over every edge;
+            `GncOptions.elimination_start`) or `"online"` (`egnc.online.OnlineSolver`'s estimate).
         warnings: one sentence per thing the user should check before trusting the result
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
         settled: whether the kept decision's rounds reached a classification that no longer
@@ -337,10 +342,25 @@ def solve(
     stage_options = options
     if refine:  # the refinement converges tightly; the stages need not
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, gnc_options.stage_rel_cost_tol))
-    schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
-    outcome = run_gnc(
-        graph, initial, schedule, robust, stage_options, gnc_options, backend, factors, on_stage, on_iteration
-    )
+
+    def graduate(start_poses: np.ndarray, start: StageStart = "guess") -> GncOutcome:
+        """The GNC stages of `method` from `(N, n, n)` poses, with a schedule of their own."""
+        schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
+        return run_gnc(
+            graph,
+            start_poses,
+            schedule,
+            robust,
+            stage_options,
+            gnc_options,
+            backend,
+            factors,
+            on_stage,
+            on_iteration,
+            start=start,
+        )
+
+    outcome = graduate(initial)
     poses, stages = outcome.poses, outcome.stages
     status, message = outcome.status, outcome.message
     robust_r = factors.whitened_norms(factors.residuals(poses))
@@ -359,6 +379,7 @@ def solve(
             if other is not None:
                 candidates["chordal"] = other
         later_starts = (
+            ("chordal-all", gnc_options.chordal_all_start, partial(all_edges_decision, graduate=graduate)),
             ("regrouped", gnc_options.regroup_start, regrouped_decision),
             ("elimination", gnc_options.elimination_start, elimination_decision),
         )

@@ -81,6 +81,11 @@ class GncOptions:
             (which does not read the initial guess) and keep the decision of lower truncated
             least-squares cost (`egnc.starts`): from a drifted guess the GNC stage can settle in a
             wrong basin that the decision rounds confirm.
+        chordal_all_start: with `refine`, where the best decision so far rejects a few loops,
+            run the GNC stage again from the chordal initialization of every edge and decide
+            from there, if that map fits better than the initial guess (`egnc.starts`), and keep
+            it if its truncated cost is lower: a GNC stage from a drifted guess can switch off
+            true loops that no map of the trusted edges brings back.
         regroup_start: with `refine`, decide once more with the rejected loops that come in runs
             (both ends within a few poses of each other's) put back together, from the chordal
             initialization over them and the accepted edges (`egnc.regroup`), where such runs
@@ -111,6 +116,7 @@ class GncOptions:
     readmit_quantile: float = 0.9999
     warm_start: bool = False
     chordal_start: bool = True
+    chordal_all_start: bool = True
     regroup_start: bool = True
     elimination_start: bool = True
     every_stage: bool = False
@@ -128,7 +134,7 @@ class GncOptions:
         for name in ("outlier_quantile", "readmit_quantile"):
             value = getattr(self, name)
             checked[name] = check_float(f"GncOptions.{name}", value, 0.0, 1.0, open_low=True, open_high=True)
-        starts = ("chordal_start", "regroup_start", "elimination_start")
+        starts = ("chordal_start", "chordal_all_start", "regroup_start", "elimination_start")
         for name in ("refine", "readmit", "warm_start", *starts, "every_stage"):
             checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
         for name, value in checked.items():
@@ -136,7 +142,7 @@ class GncOptions:
 
 
 StageKind = Literal["gnc", "decision", "probe", "elimination"]
-StageStart = Literal["guess", "chordal", "regrouped", "elimination", "online"]
+StageStart = Literal["guess", "chordal", "chordal-all", "regrouped", "elimination", "online"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,8 +162,8 @@ class StageReport:
             `egnc.decision`), `"probe"` (the few iterations `egnc.starts` gives the chordal
             start; it stops at its iteration limit by design) or `"elimination"` (a least-squares
             solve of `egnc.elimination`'s backward elimination).
-        start: the start the stage belongs to: `"guess"`, `"chordal"` (`egnc.starts`),
-            `"regrouped"` (`egnc.regroup`), `"elimination"` (`egnc.elimination`) or
+        start: the start the stage belongs to: `"guess"`, `"chordal"` or `"chordal-all"`
+            (`egnc.starts`), `"regrouped"` (`egnc.regroup`), `"elimination"` (`egnc.elimination`) or
             `"online"` (the estimate of `egnc.online.OnlineSolver`); only the stages of the
             start that was kept (`Result.start`) shape the result.
     """
@@ -242,6 +248,7 @@ def run_gnc(
     factors: BetweenFactors,
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
+    start: StageStart = "guess",
 ) -> GncOutcome:
     """Run `schedule`'s stages on `graph` from `initial_poses` `(N, n, n)`.
 
@@ -256,6 +263,7 @@ def run_gnc(
         factors: the graph's factors, built once per solve.
         on_stage: called with each `StageReport` as soon as its stage ends (progress display).
         on_iteration: called with `(iterations, cost)` after each accepted step of a stage.
+        start: the start the stages' reports belong to (`StageReport.start`).
     """
     problem = Problem.from_graph(graph, linear_solver, factors)
     poses = initial_poses
@@ -277,8 +285,8 @@ def run_gnc(
             status, message = 0, f"stopped after max_stages = {gnc_options.max_stages} stages"
             break
         started = time.perf_counter()
-        start = poses if gnc_options.warm_start else initial_poses
-        solution = solve_least_squares(problem, start, stage.loss, solver_options, on_iteration)
+        from_poses = poses if gnc_options.warm_start else initial_poses
+        solution = solve_least_squares(problem, from_poses, stage.loss, solver_options, on_iteration)
         poses = solution.poses
         r = factors.whitened_norms(factors.residuals(poses))
         reports.append(
@@ -290,6 +298,7 @@ def run_gnc(
                 status=solution.status,
                 active_edges=graph.num_edges,
                 cg_iterations=solution.linear.cg_iterations,
+                start=start,
             )
         )
         if on_stage is not None:

@@ -29,17 +29,36 @@ pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 On a graph with false loops and a good guess, this costs one chordal solve and changes nothing;
 on a clean graph with a drifted guess it returns the least-squares optimum with every loop
 accepted.
+
+Both chordal maps above are solved over the edges the GNC stage trusted, so a true loop that the
+stage switched off from a drifted guess stays out of them, and where such loops are many the
+decision cannot bring them back (SE-Sync's manhattan, a clean file whose guess is odometry
+chained over 3500 poses: 44 of 1954 loops rejected, truncated cost 1820). `all_edges_decision`
+is the start for that case: the chordal initialization of *every* edge, and the GNC stage run
+again from there (the same schedule as from the guess), then the decision. On that file it
+rejects 22 loops with truncated cost 1725 (GTSAM's GNC-TLS decision: 37 and 1685). It runs only:
+
+1. where the best decision so far rejects a loop (otherwise nothing is left to win back);
+2. where it rejects at most `ALL_EDGES_SHARE` of the loop closures: the chordal system of every
+   edge carries each rejected loop's fill-in, and many random long loops make it unaffordable
+   (a 100 000-pose grid with 30 % false loops: 462 s and 9.7 GiB, against 3 s clean);
+3. where the chordal map of every edge has a lower truncated cost than the initial guess: false
+   loops bend that map. With 10-50 % false loops (every shared file, seed 1) its truncated cost
+   was above the guess's on 34 of 36 files, while on every clean shared file, drifted or not, it
+   was below (BENCHMARKS.md); all 36 already fail the second condition.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
 
 from egnc.decision import Decision, StartContext, truncated_cost
-from egnc.gnc import StageReport, classify_inliers
-from egnc.least_squares import Problem, solve_least_squares
+from egnc.factors import to_matrices
+from egnc.gnc import GncOutcome, StageReport, classify_inliers
+from egnc.least_squares import NUMERICAL_FAILURE, Problem, solve_least_squares
 
 PROBE_ITERATIONS = 2
 """Least-squares iterations a chordal classification gets to show a lower truncated cost than
@@ -49,6 +68,10 @@ PROBE_GATE = 2.0
 """The probe runs only when the chordal poses' truncated cost is at most this many times the
 guess's decision's: 1.03 at most on the clean drifted files, 5 to 100 with 10-50 % false loops,
 where the probe would factorize every false loop's fill-in for nothing."""
+
+ALL_EDGES_SHARE = 0.05
+"""`all_edges_decision` runs only where the best decision so far rejects at most this share of
+the loop closures (each rejected loop's fill-in enters its chordal system; module docstring)."""
 
 
 def chordal_decision(
@@ -102,3 +125,39 @@ def chordal_decision(
         return None, (report,)
     decision = context.decide(probe.poses, inliers, "chordal")
     return decision, (report, *decision.reports)
+
+
+def all_edges_decision(
+    context: StartContext, to_beat: Decision, graduate: Callable[[np.ndarray], GncOutcome]
+) -> tuple[Decision | None, tuple[StageReport, ...]]:
+    """The decision after the GNC stage run again from the chordal map of every edge (module docstring).
+
+    Args:
+        context: the graph at its initial guess, its factors, options and callbacks.
+        to_beat: the best decision of the other starts so far.
+        graduate: runs the GNC stage from `(N, n, n)` poses (the schedule the guess was solved
+            with), its reports labelled `"chordal-all"`.
+
+    Returns:
+        `(decision, reports)`: the decision, or None where the start did not run (nothing
+        rejected, too much rejected, no chordal map, a chordal map no better than the guess, a
+        failed GNC stage), and the reports of the GNC stage and the rounds.
+    """
+    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
+    d, q = graph.tangent_dim, gnc_options.outlier_quantile
+    rejected = int(np.count_nonzero(robust & ~to_beat.inliers))
+    if not rejected or rejected > ALL_EDGES_SHARE * np.count_nonzero(robust):
+        return None, ()
+    poses = context.chordal_poses(np.ones(graph.num_edges, dtype=bool))
+    if poses is None:  # a chordal system the backend cannot factorize
+        return None, ()
+    guess = to_matrices(graph.dim, graph.poses)
+    at_guess = truncated_cost(factors.whitened_norms(factors.residuals(guess)), robust, d, q)
+    if truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, q) >= at_guess:
+        return None, ()
+    outcome = graduate(poses)
+    if outcome.status == NUMERICAL_FAILURE:
+        return None, outcome.stages
+    r = factors.whitened_norms(factors.residuals(outcome.poses))
+    decision = context.decide(outcome.poses, classify_inliers(r, robust, d, gnc_options), "chordal-all")
+    return decision, (*outcome.stages, *decision.reports)

@@ -23,7 +23,9 @@ from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
 from egnc.marginals import innovations, pose_covariances
 
-GUESS_ONLY = GncOptions(chordal_start=False, regroup_start=False, elimination_start=False)
+GUESS_ONLY = GncOptions(
+    chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
+)
 """The decision from the initial guess alone."""
 
 OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, chordal_start=False, elimination_start=False)

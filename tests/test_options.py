@@ -52,6 +52,7 @@ BAD_GNC_OPTIONS = [
     ("warm_start", "no"),
     ("warm_start", 0),
     ("chordal_start", "no"),
+    ("chordal_all_start", 0),
     ("elimination_start", 1),
     ("regroup_start", "on"),
     ("refine", None),

@@ -11,17 +11,21 @@ import egnc
 from egnc.api import marginal_covariances, solve
 from egnc.cli.report import summary
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import truncated_cost
+from egnc.decision import Decision, StartContext, truncated_cost
 from egnc.diagnostics import solve_warnings
-from egnc.factors import to_matrices
-from egnc.gnc import GncOptions
+from egnc.factors import BetweenFactors, to_matrices
+from egnc.gnc import GncOptions, run_gnc
 from egnc.graph import PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.kernels import chi2_quantile
-from egnc.least_squares import Problem
+from egnc.least_squares import Problem, SolverOptions
 from egnc.marginals import pose_covariances
+from egnc.schedules import make_schedule
+from egnc.starts import ALL_EDGES_SHARE, all_edges_decision
 
-GUESS_ONLY = GncOptions(chordal_start=False, regroup_start=False, elimination_start=False)
+GUESS_ONLY = GncOptions(
+    chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
+)
 """The default before the chordal start: decide from the GNC solve of the initial guess alone."""
 
 
@@ -115,3 +119,53 @@ def test_the_summary_never_says_converged_alone_when_there_are_warnings():
     assert result.warnings == () and "read them" not in summary(result, [])
     warned = dataclasses.replace(result, warnings=("something to check",))
     assert "converged" in warned.message and "warnings: 1, read them" in summary(warned, [])
+
+
+def _all_edges_start(graph: PoseGraph, rejected_loops: int):
+    """`(context, to_beat, graduate)` for `all_edges_decision` on `graph`: a decision that rejects
+    its first `rejected_loops` loop closures, and egnc's GNC stage (labelled `"chordal-all"`)."""
+    robust = ~graph.is_odometry
+    factors = BetweenFactors.from_graph(graph)
+    context = StartContext(graph, robust, factors, SolverOptions(), GncOptions(), "auto")
+    inliers = np.ones(graph.num_edges, dtype=bool)
+    inliers[np.flatnonzero(robust)[:rejected_loops]] = False
+    to_beat = Decision(to_matrices(2, graph.poses), inliers, (), True, np.inf)
+
+    def graduate(poses: np.ndarray):
+        schedule = make_schedule("egnc", robust, graph.tangent_dim)
+        options = SolverOptions()
+        return run_gnc(graph, poses, schedule, robust, options, GncOptions(), "auto", factors, start="chordal-all")
+
+    return context, to_beat, graduate
+
+
+def test_the_all_edges_start_wins_back_loops_from_a_drifted_guess():
+    graph = drifted_guess(grid_world(2, 1000, seed=1).graph, seed=2, heading_sigma=0.5)
+    context, to_beat, graduate = _all_edges_start(graph, rejected_loops=10)
+    decision, reports = all_edges_decision(context, to_beat, graduate)
+    assert decision is not None and np.count_nonzero(~decision.inliers) <= 2
+    # and it beats the decision it was given, taken at its own least-squares map
+    given = solve(graph.subgraph_edges(to_beat.inliers), "l2", init="chordal").graph.poses
+    factors = BetweenFactors.from_graph(graph)
+    r = factors.whitened_norms(factors.residuals(to_matrices(2, given)))
+    assert decision.truncated_cost < truncated_cost(r, ~graph.is_odometry, 3, 0.99)
+    assert reports[0].kind == "gnc" and {report.start for report in reports} == {"chordal-all"}
+
+
+def _never_called(*args, **kwargs):
+    raise AssertionError("the start went further than its gate")
+
+
+def test_the_all_edges_start_does_not_run_without_reason(monkeypatch):
+    graph = drifted_guess(grid_world(2, 400, seed=1).graph, seed=2, heading_sigma=0.5)
+    loops = int(np.count_nonzero(~graph.is_odometry))
+    context, nothing_rejected, _ = _all_edges_start(graph, rejected_loops=0)
+    assert all_edges_decision(context, nothing_rejected, _never_called) == (None, ())
+    # the guess fits better than the chordal map of every edge: the least-squares optimum
+    optimum = graph.with_poses(solve(graph, "l2", init="chordal").graph.poses)
+    context, to_beat, _ = _all_edges_start(optimum, rejected_loops=1)
+    assert all_edges_decision(context, to_beat, _never_called) == (None, ())
+    # too many rejected loops: not even the chordal system of every edge is solved
+    monkeypatch.setattr("egnc.decision.chordal_initialization", _never_called)
+    context, many_rejected, _ = _all_edges_start(graph, rejected_loops=int(ALL_EDGES_SHARE * loops) + 1)
+    assert all_edges_decision(context, many_rejected, _never_called) == (None, ())
