@@ -57,7 +57,7 @@ import numpy as np
 
 from egnc.decision import Decision, StartContext, truncated_cost
 from egnc.factors import to_matrices
-from egnc.gnc import GncOutcome, StageReport, classify_inliers
+from egnc.gnc import GncOutcome, StageReport, StageStart, classify_inliers
 from egnc.least_squares import NUMERICAL_FAILURE, Problem, solve_least_squares
 
 PROBE_ITERATIONS = 2
@@ -128,7 +128,7 @@ def chordal_decision(
 
 
 def all_edges_decision(
-    context: StartContext, to_beat: Decision, graduate: Callable[[np.ndarray], GncOutcome]
+    context: StartContext, to_beat: Decision, graduate: Callable[[np.ndarray, StageStart], GncOutcome]
 ) -> tuple[Decision | None, tuple[StageReport, ...]]:
     """The decision after the GNC stage run again from the chordal map of every edge (module docstring).
 
@@ -136,7 +136,7 @@ def all_edges_decision(
         context: the graph at its initial guess, its factors, options and callbacks.
         to_beat: the best decision of the other starts so far.
         graduate: runs the GNC stage from `(N, n, n)` poses (the schedule the guess was solved
-            with), its reports labelled `"chordal-all"`.
+            with), its reports labelled with the given start.
 
     Returns:
         `(decision, reports)`: the decision, or None where the start did not run (nothing
@@ -155,7 +155,7 @@ def all_edges_decision(
     at_guess = truncated_cost(factors.whitened_norms(factors.residuals(guess)), robust, d, q)
     if truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, q) >= at_guess:
         return None, ()
-    outcome = graduate(poses)
+    outcome = graduate(poses, "chordal-all")
     if outcome.status == NUMERICAL_FAILURE:
         return None, outcome.stages
     r = factors.whitened_norms(factors.residuals(outcome.poses))

@@ -14,7 +14,7 @@ from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import Decision, StartContext, truncated_cost
 from egnc.diagnostics import solve_warnings
 from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions, run_gnc
+from egnc.gnc import GncOptions, StageStart, run_gnc
 from egnc.graph import PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.kernels import chi2_quantile
@@ -123,7 +123,7 @@ def test_the_summary_never_says_converged_alone_when_there_are_warnings():
 
 def _all_edges_start(graph: PoseGraph, rejected_loops: int):
     """`(context, to_beat, graduate)` for `all_edges_decision` on `graph`: a decision that rejects
-    its first `rejected_loops` loop closures, and egnc's GNC stage (labelled `"chordal-all"`)."""
+    its first `rejected_loops` loop closures, and egnc's GNC stage."""
     robust = ~graph.is_odometry
     factors = BetweenFactors.from_graph(graph)
     context = StartContext(graph, robust, factors, SolverOptions(), GncOptions(), "auto")
@@ -131,10 +131,9 @@ def _all_edges_start(graph: PoseGraph, rejected_loops: int):
     inliers[np.flatnonzero(robust)[:rejected_loops]] = False
     to_beat = Decision(to_matrices(2, graph.poses), inliers, (), True, np.inf)
 
-    def graduate(poses: np.ndarray):
+    def graduate(poses: np.ndarray, start: StageStart):
         schedule = make_schedule("egnc", robust, graph.tangent_dim)
-        options = SolverOptions()
-        return run_gnc(graph, poses, schedule, robust, options, GncOptions(), "auto", factors, start="chordal-all")
+        return run_gnc(graph, poses, schedule, robust, SolverOptions(), GncOptions(), "auto", factors, start=start)
 
     return context, to_beat, graduate
 
