@@ -35,7 +35,7 @@ from egnc.graph import PoseGraph
 from egnc.metrics import precision_recall
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_drifted import DEFAULT_DATA, DRIFTED, NEEDS_REPAIR, SHARED, drifted  # noqa: E402
+from bench_drifted import DEFAULT_DATA, DRIFTED, SHARED, cases, load  # noqa: E402
 
 GUESS_ONLY_FROM_CHORDAL = GncOptions(
     chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
@@ -46,25 +46,13 @@ CORRUPTED = (
 )
 
 
-def _load(data_dir: Path, name: str) -> PoseGraph:
-    if name == "grid3d":
-        return egnc.datasets.grid_world(3, 2000, seed=1).graph
-    return egnc.read_g2o(data_dir / f"{name}.g2o", information=NEEDS_REPAIR.get(name, "strict"))
-
-
 def rows(args: argparse.Namespace):
     """`(name, graph, is_outlier or None, graduate)` of every row."""
-    for name in filter(None, args.files.split(",")):
-        yield name, _load(args.data_dir, name), None, True
-    for name in filter(None, args.drifted.split(",")):
-        graph = _load(args.data_dir, name)
-        for kind, level in (("heading", 0.1), ("heading", 0.3), ("scaled", 10.0)):
-            for seed in (1, 2):
-                yield f"{name} {kind} {level:g} s{seed}", drifted(graph, kind, level, seed), None, True
-    for path in filter(None, args.extra.split(",")):
-        yield Path(path).stem, egnc.read_g2o(path), None, True
+    drifted_rows = argparse.Namespace(**vars(args), heading="0.1,0.3", scaled="10", seeds="1,2")
+    for name, graph in cases(drifted_rows):  # clean files, their drifted variants, the extra files
+        yield name, graph, None, True
     for name in filter(None, args.corrupted.split(",")):
-        graph = _load(args.data_dir, name)
+        graph = load(args.data_dir, name)
         reference = least_squares_optimum(graph, "auto").graph.poses
         for percent in (float(value) for value in args.percent.split(",")):
             corrupted = add_false_loops(graph, percent, seed=1, reference_poses=reference)

@@ -109,19 +109,23 @@ def field(outcome: Outcome | None, key: str, optimum: float | None = None) -> st
     return f"{value:.2f}" if isinstance(value, float) else str(value)
 
 
+def load(data_dir: Path, name: str) -> PoseGraph:
+    """A shared file of `data_dir` (repaired where `NEEDS_REPAIR` says), or `grid3d`: a generated 2000-pose 3D grid."""
+    if name == "grid3d":
+        return grid_world(3, 2000, seed=1).graph
+    return egnc.read_g2o(data_dir / f"{name}.g2o", information=NEEDS_REPAIR.get(name, "strict"))
+
+
 def cases(args: argparse.Namespace) -> list[tuple[str, PoseGraph]]:
-    """`(name, graph)` of every row: shared files as given, their drifted variants, the extra files."""
+    """`(name, graph)` of every row: shared files as given, their drifted variants, the extra files.
+
+    `args` needs `data_dir`, `files`, `drifted`, `heading`, `scaled`, `seeds` and `extra` (see `main`).
+    """
     rows = []
-
-    def load(name: str) -> PoseGraph:
-        if name == "grid3d":
-            return grid_world(3, 2000, seed=1).graph
-        return egnc.read_g2o(args.data_dir / f"{name}.g2o", information=NEEDS_REPAIR.get(name, "strict"))
-
     for name in filter(None, args.files.split(",")):
-        rows.append((name, load(name)))
+        rows.append((name, load(args.data_dir, name)))
     for name in filter(None, args.drifted.split(",")):
-        graph = load(name)
+        graph = load(args.data_dir, name)
         for kind, levels in (("heading", args.heading), ("scaled", args.scaled)):
             for level in (float(value) for value in levels.split(",") if value):
                 for seed in (int(value) for value in args.seeds.split(",")):
