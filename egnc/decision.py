@@ -55,7 +55,6 @@ References:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -75,7 +74,7 @@ from egnc.least_squares import (
     SolverResult,
     solve_least_squares,
 )
-from egnc.linear_solvers import NotPositiveDefiniteError
+from egnc.linear_solvers import Factorization, NotPositiveDefiniteError
 from egnc.marginals import covariance_solver, innovations
 
 MAX_ROUNDS = 5
@@ -141,7 +140,7 @@ def _all_agree(
     poses: np.ndarray,
     factors: BetweenFactors,
     candidates: np.ndarray,
-    covariance_solve: Callable[[np.ndarray], np.ndarray],
+    covariance_solve: Factorization,
     threshold: float,
 ) -> bool:
     """Whether every loop of `candidates` `(K,)` (by increasing `r`) passes, batch by batch.
@@ -183,7 +182,7 @@ def _batch_innovations(
     poses: np.ndarray,
     factors: BetweenFactors,
     batch: np.ndarray,
-    covariance_solve: Callable[[np.ndarray], np.ndarray],
+    covariance_solve: Factorization,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Innovations `(K, d)`, covariance `(K d, K d)` and `(K,)` "well determined" flags of edges `batch`, in edge order.
 

@@ -43,10 +43,11 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from types import ModuleType
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -75,6 +76,31 @@ class NotPositiveDefiniteError(SolverError):
     """The (damped) normal-equations matrix could not be factorized."""
 
 
+@dataclass(frozen=True, eq=False)
+class TriangularFactor:
+    """A factorization `A = P^T L D L^T P` as sparse arrays.
+
+    Attributes:
+        lower: `(n, n)` CSC lower-triangular `L` with sorted row indices and its diagonal stored.
+        order: `(n,)` the unknown at each elimination position: `(P x)[k] = x[order[k]]`.
+        pivots: `(n,)` the diagonal of `D`, or None for `A = P^T L L^T P`.
+    """
+
+    lower: sp.csc_matrix
+    order: np.ndarray
+    pivots: np.ndarray | None
+
+
+class Factorization(Protocol):
+    """One numeric factorization of `A`: `rhs -> A^-1 rhs` (`rhs` `(n,)` or `(n, k)`), and its factor."""
+
+    def __call__(self, rhs: np.ndarray) -> np.ndarray: ...
+
+    def triangular(self) -> TriangularFactor | None:
+        """The factor as sparse arrays (computed on the first call), or None where the backend does not expose it."""
+        ...
+
+
 class LinearSolver(Protocol):
     """Solves `A x = b` for matrices that all share one CSC pattern."""
 
@@ -84,8 +110,8 @@ class LinearSolver(Protocol):
         """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
         ...
 
-    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize the matrix with CSC values `data` `(nnz,)`; return `rhs -> A^-1 rhs`."""
+    def factorize(self, data: np.ndarray) -> Factorization:
+        """Factorize the matrix with CSC values `data` `(nnz,)`."""
         ...
 
 
@@ -336,21 +362,39 @@ class CholmodSolver:
         """Factorize the analysed pattern with values `data` and solve for `rhs`."""
         return self.factorize(data)(rhs)
 
-    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize the analysed pattern with values `data`; return `rhs -> A^-1 rhs`.
+    def factorize(self, data: np.ndarray) -> Factorization:
+        """Factorize the analysed pattern with values `data`.
 
-        The returned solve is valid until the next `factorize` (the factor is updated in place).
+        The factorization is valid until the next `factorize` (the factor is updated in place).
         """
         with serial_native_threads():
             try:
                 self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
             except self._cholmod.CholmodNotPositiveDefiniteError as error:
                 raise NotPositiveDefiniteError(f"normal equations are not positive definite ({error})") from None
-        return self._solve
+        return _CholmodFactorization(self.factor)
 
-    def _solve(self, rhs: np.ndarray) -> np.ndarray:
+
+class _CholmodFactorization:
+    """A CHOLMOD `Factor` as a `Factorization`."""
+
+    def __init__(self, factor: Any):
+        self._factor = factor
+        self._triangular: TriangularFactor | None = None
+
+    def __call__(self, rhs: np.ndarray) -> np.ndarray:
         with serial_native_threads():
-            return self.factor(rhs)
+            return self._factor(rhs)
+
+    def triangular(self) -> TriangularFactor:
+        """`L` of `A = P^T L L^T P`, from a copy (converting the analysed factor would make its later
+        factorizations simplicial)."""
+        if self._triangular is None:
+            with serial_native_threads():
+                lower = sp.csc_matrix(self._factor.copy().L())
+            lower.sort_indices()
+            self._triangular = TriangularFactor(lower, np.asarray(self._factor.P(), dtype=np.int64), None)
+        return self._triangular
 
 
 class RslabSolver:
@@ -376,8 +420,8 @@ class RslabSolver:
         """Factorize the analysed pattern with values `data` and solve for `rhs`."""
         return self.factorize(data)(rhs)
 
-    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize the analysed pattern with values `data`; return `rhs -> A^-1 rhs` (`rhs`: `(n,)` or `(n, k)`)."""
+    def factorize(self, data: np.ndarray) -> Factorization:
+        """Factorize the analysed pattern with values `data` (its factor is not exposed: `triangular()` is None)."""
         values = np.ascontiguousarray(data if self._lower is None else data[self._lower], dtype=np.float64)
         try:
             factor = self.symbolic.factor(values)
@@ -393,7 +437,7 @@ class RslabSolver:
             rhs = np.ascontiguousarray(rhs, dtype=np.float64)
             return factor.solve(rhs) if rhs.ndim == 1 else factor.solve_many(rhs)
 
-        return solve
+        return SolveOnly(solve)
 
 
 class ScipySolver:
@@ -410,8 +454,8 @@ class ScipySolver:
         """Factorize the matrix with values `data` (SuperLU) and solve for `rhs`."""
         return self.factorize(data)(rhs)
 
-    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize the matrix with values `data` (SuperLU); return `rhs -> A^-1 rhs`."""
+    def factorize(self, data: np.ndarray) -> Factorization:
+        """Factorize the matrix with values `data` (SuperLU)."""
         from scipy.sparse.linalg import splu
 
         matrix = _matrix(data, self._indices, self._indptr)
@@ -425,12 +469,43 @@ class ScipySolver:
                 )
         except RuntimeError as error:  # SuperLU reports an exactly singular factor this way
             raise NotPositiveDefiniteError(f"normal equations are singular ({error})") from None
+        return _SuperLUFactorization(lu)
 
-        def solve(rhs: np.ndarray) -> np.ndarray:
-            with serial_native_threads():
-                return lu.solve(rhs)
 
-        return solve
+class _SuperLUFactorization:
+    """A SuperLU factorization in symmetric mode as a `Factorization`."""
+
+    def __init__(self, lu: Any):
+        self._lu = lu
+        self._triangular: TriangularFactor | None = None
+
+    def __call__(self, rhs: np.ndarray) -> np.ndarray:
+        with serial_native_threads():
+            return self._lu.solve(rhs)
+
+    def triangular(self) -> TriangularFactor | None:
+        """`P_r A P_c = L U` with diagonal pivots: `P_r = P_c` and `U = D L^T` for a symmetric `A`
+        (None when a pivot left the diagonal)."""
+        lu = self._lu
+        if self._triangular is None and np.array_equal(lu.perm_r, lu.perm_c):
+            lower = sp.csc_matrix(lu.L)
+            lower.sort_indices()
+            self._triangular = TriangularFactor(lower, np.argsort(lu.perm_r).astype(np.int64), lu.U.diagonal())
+        return self._triangular
+
+
+class SolveOnly:
+    """A factorization known only by its solve: `triangular()` is None."""
+
+    def __init__(self, solve: Callable[[np.ndarray], np.ndarray]):
+        self._solve = solve
+
+    def __call__(self, rhs: np.ndarray) -> np.ndarray:
+        return self._solve(rhs)
+
+    def triangular(self) -> None:
+        """None: the factor is not exposed."""
+        return None
 
 
 def make_linear_solver(name: str, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False) -> LinearSolver:

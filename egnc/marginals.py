@@ -16,6 +16,13 @@ factorization (in groups of columns, to bound memory). `B` has `2 d` nonzeros pe
 is kept sparse and `B^T H^-1 B` is a sparse-dense product: as a dense product it cost twice the
 solve itself (a 192-column batch over 75 000 unknowns: 1.3 s against 0.7 s).
 
+The joint covariance of a few queries (`innovations`) needs less: with `H = P^T L D L^T P`,
+`B^T H^-1 B = W^T D^-1 W` for `W = L^-1 P B`, and `W` is zero outside the *reach* of `B`'s rows,
+the positions whose elimination depends on them (their ancestors in the elimination tree). So
+`W` is solved with the columns of `L` on that reach only, where the backend exposes its factor
+(`egnc.linear_solvers.TriangularFactor`): on a 100 000-pose 2D grid a 64-loop batch's reach is
+7 % of the unknowns and 31 % of `L`'s entries (BENCHMARKS.md, issue 18).
+
 References:
     M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data
     association", RAS 2009 (marginals of selected poses and of data-association candidates).
@@ -30,13 +37,24 @@ import scipy.sparse as sp
 
 from egnc.factors import BetweenFactors
 from egnc.least_squares import Problem
+from egnc.linear_solvers import Factorization, TriangularFactor, serial_native_threads
 
 _MAX_RHS_VALUES = 2**24
 """Largest `n x columns` right-hand side solved at once (128 MiB of float64)."""
 
+REACH_MIN_UNKNOWNS = 50_000
+"""Systems with fewer unknowns solve `B^T H^-1 B` whole: their solves take milliseconds, less than
+exposing the factor and importing SciPy's triangular solver (BENCHMARKS.md, issue 18)."""
 
-def covariance_solver(problem: Problem, poses: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-    """`B -> H^-1 B` for the unweighted information `H` of `problem` at `poses` `(N, n, n)` (one factorization).
+REACH_MAX_SHARE = 0.4
+"""The reach solve is used when the columns of `L` on the reach hold at most this share of its
+entries. Per entry and right-hand side it costs about 0.55 ns here, a backend's whole solve
+(forward and back) 0.22 ns (CHOLMOD on a 3D grid's large supernodes) to 1.3 ns (SuperLU); below
+0.4 the reach is never the slower (BENCHMARKS.md, issue 18)."""
+
+
+def covariance_solver(problem: Problem, poses: np.ndarray) -> Factorization:
+    """The factorization of the unweighted information `H` of `problem` at `poses` `(N, n, n)`: `B -> H^-1 B`.
 
     Raises:
         NotPositiveDefiniteError: `H` cannot be factorized (a degenerate solution).
@@ -135,7 +153,7 @@ def innovations(
     problem: Problem,
     poses: np.ndarray,
     loops: BetweenFactors,
-    covariance_solve: Callable[[np.ndarray], np.ndarray] | None = None,
+    covariance_solve: Factorization | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Residuals of loop closures left out of `problem` and their joint predicted covariance.
 
@@ -159,10 +177,92 @@ def innovations(
         B = _transposed_jacobians(problem, loops.edges, blocks)
         if covariance_solve is None:
             covariance_solve = covariance_solver(problem, poses)
-        transposed = B.T.tocsr()
-        for columns, X in _solved_columns(B, covariance_solve, d):
-            S[:, columns] = transposed @ X
-        S = 0.5 * (S + S.T)
+        S = quadratic_form(B, covariance_solve)
     block = np.arange(len(e))[:, None] * d + np.arange(d)  # (K, d) rows of each loop
     S[block[:, :, None], block[:, None, :]] += np.linalg.inv(loops.information)
     return e, S
+
+
+def quadratic_form(B: sp.csc_matrix, covariance_solve: Factorization) -> np.ndarray:
+    """`(K, K)` `B^T H^-1 B`, symmetrized, for a sparse `B` `(n, K)` and the factorization of `H`.
+
+    Solved on the reach of `B`'s rows (module docstring) when the system has at least
+    `REACH_MIN_UNKNOWNS` unknowns, the factor is exposed, the reach holds at most
+    `REACH_MAX_SHARE` of it and its solution fits the memory bound of a right-hand side; else by
+    whole solves in column groups.
+    """
+    factor = covariance_solve.triangular() if B.shape[0] >= REACH_MIN_UNKNOWNS else None
+    solved = None if factor is None else _reach_solve(factor, B)
+    if factor is not None and solved is not None:
+        reach, W = solved
+        out = W.T @ (W if factor.pivots is None else W / factor.pivots[reach, None])
+        return 0.5 * (out + out.T)
+    out = np.empty((B.shape[1], B.shape[1]))
+    transposed = B.T.tocsr()
+    for columns, X in _solved_columns(B, covariance_solve, 1):
+        out[:, columns] = transposed @ X
+    return 0.5 * (out + out.T)
+
+
+def _reach_solve(factor: TriangularFactor, B: sp.csc_matrix) -> tuple[np.ndarray, np.ndarray] | None:
+    """`(reach, W)`: the elimination positions `reach` `(m,)` where `L^-1 P B` can be nonzero, and
+    its rows there `(m, K)`; None when `m K` exceeds the right-hand-side bound (`_MAX_RHS_VALUES`)
+    or the reach's columns hold more than `REACH_MAX_SHARE` of `L`'s entries."""
+    lower = factor.lower
+    n = lower.shape[0]
+    position = np.empty(n, dtype=np.int64)
+    position[factor.order] = np.arange(n)
+    rows = position[B.indices]  # elimination position of each entry of B
+    sources = np.unique(rows)
+
+    def worth_it(reach: np.ndarray) -> bool:
+        return len(reach) * B.shape[1] <= _MAX_RHS_VALUES and _entries(lower, reach) <= REACH_MAX_SHARE * lower.nnz
+
+    reach = _ancestors(_elimination_tree(lower), sources)
+    if not worth_it(reach):  # nor is the factor's whole reach, which holds this one
+        return None
+    local = np.full(n, -1, dtype=np.int64)
+    local[reach] = np.arange(len(reach))
+    columns = lower[:, reach]
+    if np.any(local[columns.indices] < 0):  # a factor whose columns reach past their tree ancestors
+        reach = _ancestors(lower, sources)
+        if not worth_it(reach):
+            return None
+        local[reach] = np.arange(len(reach))
+        columns = lower[:, reach]
+    from scipy.sparse.linalg import spsolve_triangular
+
+    restricted = sp.csc_matrix((columns.data, local[columns.indices], columns.indptr), shape=(len(reach),) * 2)
+    rhs = sp.csc_matrix((B.data, local[rows], B.indptr), shape=(len(reach), B.shape[1])).toarray()
+    with serial_native_threads():  # SuperLU's triangular solve calls SciPy's OpenBLAS
+        W = spsolve_triangular(restricted, rhs, lower=True, overwrite_A=True, overwrite_b=True)
+    return reach, W
+
+
+def _entries(lower: sp.csc_matrix, positions: np.ndarray) -> int:
+    """Stored entries of the columns `positions` of `lower`."""
+    return int(np.sum(np.diff(lower.indptr)[positions]))
+
+
+def _elimination_tree(lower: sp.csc_matrix) -> sp.csc_matrix:
+    """`(n, n)` pattern whose column `k` holds the parent of position `k` in the elimination tree of
+    `lower` (the first row below the diagonal of its column), empty for a root."""
+    n = lower.shape[0]
+    first_below = lower.indptr[:-1] + (lower.indices[lower.indptr[:-1]] == np.arange(n))
+    has_parent = first_below < lower.indptr[1:]
+    parents = lower.indices[first_below[has_parent]]
+    indptr = np.concatenate([[0], np.cumsum(has_parent)])
+    return sp.csc_matrix((np.ones(len(parents)), parents, indptr), shape=(n, n))
+
+
+def _ancestors(graph: sp.csc_matrix, sources: np.ndarray) -> np.ndarray:
+    """Sorted positions reachable from `sources` along `graph`'s edges (column `k` to its rows), sources included."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    n = graph.shape[0]
+    # A virtual vertex n with an edge to every source: one traversal from it reaches the union.
+    indptr = np.concatenate([graph.indptr, [graph.indptr[-1] + len(sources)]])
+    indices = np.concatenate([graph.indices, sources])
+    edges = sp.csr_matrix((np.ones(len(indices)), indices, indptr), shape=(n + 1, n + 1))
+    reached = breadth_first_order(edges, n, directed=True, return_predecessors=False)
+    return np.sort(reached[1:])

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -47,8 +47,10 @@ import scipy.sparse as sp
 from egnc.connectivity import connected_components
 from egnc.linear_solvers import (
     Backend,
+    Factorization,
     LinearSolver,
     NotPositiveDefiniteError,
+    TriangularFactor,
     block_order,
     lower_triangle_only,
     make_linear_solver,
@@ -161,8 +163,8 @@ class _OnFirstUse:
         """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
         return self._analysed().solve(data, rhs)
 
-    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize the matrix with CSC values `data` `(nnz,)`; return `rhs -> A^-1 rhs`."""
+    def factorize(self, data: np.ndarray) -> Factorization:
+        """Factorize the matrix with CSC values `data` `(nnz,)`."""
         return self._analysed().factorize(data)
 
 
@@ -209,22 +211,33 @@ class _InBlockOrder:
         """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
         return self.factorize(data)(rhs)
 
-    def factorize(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize the matrix with CSC values `data` `(nnz,)` (pose-row order); return `rhs -> A^-1 rhs`."""
-        ordered_solve = self._solver.factorize(data[self._slots])
+    def factorize(self, data: np.ndarray) -> Factorization:
+        """Factorize the matrix with CSC values `data` `(nnz,)` (pose-row order)."""
+        return _PermutedFactorization(self._solver.factorize(data[self._slots]), self._unknowns)
+
+
+class _PermutedFactorization:
+    """The factorization of `A[unknowns][:, unknowns]` as one of `A` (`_InBlockOrder`)."""
+
+    def __init__(self, ordered: Factorization, unknowns: np.ndarray):
+        self._ordered = ordered
+        self._unknowns = unknowns
+
+    def __call__(self, rhs: np.ndarray) -> np.ndarray:
         unknowns = self._unknowns
-
-        def solve(rhs: np.ndarray) -> np.ndarray:
-            out = np.empty(rhs.shape)
-            if rhs.ndim == 1:
-                out[unknowns] = ordered_solve(rhs[unknowns])
-                return out
-            for start in range(0, rhs.shape[1], _PERMUTED_COLUMNS):
-                columns = slice(start, start + _PERMUTED_COLUMNS)
-                out[unknowns, columns] = ordered_solve(rhs[unknowns, columns])
+        out = np.empty(rhs.shape)
+        if rhs.ndim == 1:
+            out[unknowns] = self._ordered(rhs[unknowns])
             return out
+        for start in range(0, rhs.shape[1], _PERMUTED_COLUMNS):
+            columns = slice(start, start + _PERMUTED_COLUMNS)
+            out[unknowns, columns] = self._ordered(rhs[unknowns, columns])
+        return out
 
-        return solve
+    def triangular(self) -> TriangularFactor | None:
+        """The ordered factor, its elimination order mapped back to `A`'s unknowns."""
+        factor = self._ordered.triangular()
+        return None if factor is None else replace(factor, order=self._unknowns[factor.order])
 
 
 @dataclass

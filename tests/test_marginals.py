@@ -1,0 +1,132 @@
+"""Factors exposed by the linear solvers and the quadratic forms `B^T H^-1 B` solved on a reach."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import egnc.marginals as marginals_module
+from egnc.api import solve
+from egnc.datasets import grid_world
+from egnc.factors import BetweenFactors, to_matrices
+from egnc.least_squares import Problem
+from egnc.linear_solvers import TriangularFactor, cholmod_available, make_linear_solver, rslab_available
+from egnc.marginals import innovations, quadratic_form
+
+BACKENDS = [
+    "scipy",
+    pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+    pytest.param("rslab", marks=pytest.mark.skipif(not rslab_available(), reason="no rslab")),
+]
+
+
+def chain_with_branches(n: int, seed: int) -> np.ndarray:
+    """An SPD matrix of 3x3 blocks on a chain of `n // 3` poses plus a few random long edges (a pose graph's shape)."""
+    rng = np.random.default_rng(seed)
+    blocks = n // 3
+    pairs = [(k, k + 1) for k in range(blocks - 1)] + [tuple(rng.choice(blocks, 2, replace=False)) for _ in range(4)]
+    matrix = np.zeros((n, n))
+    for i, j in pairs:
+        J = np.zeros((3, n))
+        J[:, 3 * i : 3 * i + 3] = -np.eye(3) + 0.1 * rng.normal(size=(3, 3))
+        J[:, 3 * j : 3 * j + 3] = np.eye(3)
+        matrix += J.T @ J
+    return matrix + np.eye(n)
+
+
+def factorized(backend: str, matrix: np.ndarray):
+    stored = sp.csc_matrix(np.tril(matrix) if backend in ("cholmod", "rslab") else matrix)
+    return make_linear_solver(backend, stored.indptr, stored.indices).factorize(stored.data)
+
+
+@pytest.mark.parametrize("backend", ["scipy", BACKENDS[1]])
+def test_the_exposed_factor_rebuilds_the_matrix(backend):
+    matrix = chain_with_branches(60, seed=1)
+    factor = factorized(backend, matrix).triangular()
+    assert factor is not None
+    L = factor.lower.toarray()
+    assert np.allclose(L, np.tril(L))
+    D = np.ones(len(L)) if factor.pivots is None else factor.pivots
+    permuted = matrix[np.ix_(factor.order, factor.order)]  # P A P^T
+    np.testing.assert_allclose(L @ np.diag(D) @ L.T, permuted, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_quadratic_forms_on_the_reach_and_by_whole_solves_equal_a_dense_inverse(backend, monkeypatch):
+    matrix = chain_with_branches(90, seed=2)
+    rng = np.random.default_rng(3)
+    B = sp.csc_matrix(np.where(rng.random((90, 6)) < 0.05, rng.normal(size=(90, 6)), 0.0))
+    expected = B.T @ np.linalg.solve(matrix, B.toarray())
+    factorization = factorized(backend, matrix)
+    np.testing.assert_allclose(quadratic_form(B, factorization), expected, rtol=1e-9, atol=1e-12)  # whole: small
+    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    reached = []
+    monkeypatch.setattr(marginals_module, "_reach_solve", spy(marginals_module._reach_solve, reached))
+    np.testing.assert_allclose(quadratic_form(B, factorization), expected, rtol=1e-9, atol=1e-12)
+    assert reached == ([] if backend == "rslab" else [True])  # rslab does not expose its factor
+    # A reach too large for the right-hand-side bound, or for the share, falls back to whole solves.
+    for name, value in (("_MAX_RHS_VALUES", 1), ("REACH_MAX_SHARE", 0.0)):
+        with monkeypatch.context() as patched:
+            patched.setattr(marginals_module, name, value)
+            reached.clear()
+            np.testing.assert_allclose(quadratic_form(B, factorization), expected, rtol=1e-9, atol=1e-12)
+            assert reached == ([] if backend == "rslab" else [False])
+
+
+def spy(reach_solve, calls: list):
+    """`reach_solve` recording whether each call solved on the reach (True) or declined (False)."""
+
+    def recorded(factor, B):
+        out = reach_solve(factor, B)
+        calls.append(out is not None)
+        return out
+
+    return recorded
+
+
+def test_the_reach_solve_is_zero_outside_the_reach_and_exact_on_it(monkeypatch):
+    # A chain's first loop closure reaches only the poses eliminated after its ends.
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    matrix = chain_with_branches(90, seed=4)
+    factor = factorized("scipy", matrix).triangular()
+    assert factor is not None
+    B = sp.csc_matrix(([1.0, -1.0], ([5, 40], [0, 0])), shape=(90, 1))
+    reach, W = marginals_module._reach_solve(factor, B)
+    full = np.linalg.solve(factor.lower.toarray(), B.toarray()[factor.order])
+    np.testing.assert_allclose(W, full[reach], rtol=1e-12, atol=1e-14)
+    outside = np.setdiff1d(np.arange(90), reach)
+    assert len(outside) > 0 and np.all(full[outside] == 0.0)
+
+
+def test_a_factor_whose_columns_reach_past_their_tree_ancestors_is_solved_on_its_whole_reach(monkeypatch):
+    # Column 0 holds rows 1 and 2, column 1 only its diagonal: the elimination tree (first row
+    # below the diagonal) makes 1 the parent of 0 and misses that 0 reaches 2 directly.
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    lower = sp.csc_matrix(np.array([[2.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.5, 0.0, 1.0]]))
+    factor = TriangularFactor(lower, np.arange(3), None)
+    B = sp.csc_matrix(np.array([[1.0], [0.0], [0.0]]))
+    reach, W = marginals_module._reach_solve(factor, B)
+    np.testing.assert_array_equal(reach, [0, 1, 2])
+    np.testing.assert_allclose(W[:, 0], np.linalg.solve(lower.toarray(), [1.0, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_innovations_of_a_problem_in_block_order_are_the_same_on_the_reach(backend, monkeypatch):
+    # SciPy factorizes a problem's pattern in its block order (`_InBlockOrder`): the exposed
+    # factor's elimination order maps back to the problem's unknowns.
+    graph = grid_world(2, 300, seed=5, noise_scale=0.5).graph
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[np.flatnonzero(graph.is_loop_closure)[::3]] = True
+    poses = to_matrices(2, solve(graph.subgraph_edges(~left_out), "l2").graph.poses)
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out), backend)
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    whole = innovations(problem, poses, loops)[1]
+    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    reached = []
+    monkeypatch.setattr(marginals_module, "_reach_solve", spy(marginals_module._reach_solve, reached))
+    on_reach = innovations(problem, poses, loops)[1]
+    assert reached == ([] if backend == "rslab" else [True])
+    np.testing.assert_allclose(on_reach, whole, rtol=1e-9, atol=1e-12)
