@@ -1,0 +1,121 @@
+"""Readmission's joint covariance `B^T H^-1 B` by whole solves against the solve on the reach of `B`.
+
+    python benchmarks/bench_reach.py [--grid 25000,100000] [--grid3d 20000] [--loops 64]
+        [--backends cholmod,scipy] [--repeats 3]
+
+For each generated grid (`egnc.datasets.grid_world`, seed 1, its guess as the linearization
+point) `--loops` random loop closures are left out of the map, as a readmission batch is, and
+`egnc.marginals.quadratic_form` computes their `B^T H^-1 B` (`3 --loops` columns in 2D, `6
+--loops` in 3D) from one factorization of the map's information, both ways:
+
+- `whole s`: forward and back solves of every column over all unknowns;
+- `reach s`: `W = L^-1 P B` on the reach of the batch's poses only, `W^T D^-1 W`;
+- `factor s`: exposing the factor as sparse arrays (once per factorization; not in `reach s`).
+
+`reach rows` and `reach entries` are the reach's share of the unknowns and of `L`'s stored
+entries; `default` is the path `quadratic_form` takes (the reach on systems of at least
+`REACH_MIN_UNKNOWNS` unknowns whose reach holds at most `REACH_MAX_SHARE` of `L`'s entries);
+`max rel diff` compares the two results. Times are medians of
+`--repeats`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import egnc.marginals as marginals
+from egnc.datasets import grid_world
+from egnc.factors import BetweenFactors, to_matrices
+from egnc.least_squares import Problem
+from egnc.linear_solvers import cholmod_available
+
+
+def _median_time(run, repeats: int):
+    times, out = [], None
+    for _ in range(repeats):
+        started = time.perf_counter()
+        out = run()
+        times.append(time.perf_counter() - started)
+    return statistics.median(times), out
+
+
+def measure(dim: int, poses: int, loops: int, backend: str, repeats: int) -> dict:
+    """One row: the grid of `poses` poses in `dim` D with `loops` loops left out, on `backend`."""
+    graph = grid_world(dim, poses, seed=1).graph
+    candidates = np.flatnonzero(graph.is_loop_closure)
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[np.random.default_rng(1).choice(candidates, loops, replace=False)] = True
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out), backend)
+    matrices = to_matrices(dim, graph.poses)
+    batch = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    linearization = batch.linearize(matrices)
+    B = marginals._transposed_jacobians(
+        problem, batch.edges, np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
+    )
+    factorization = marginals.covariance_solver(problem, matrices)
+    factor_s, factor = _median_time(factorization.triangular, 1)
+    if factor is None:
+        raise SystemExit(f"{backend} does not expose its factor")
+    whole_s, whole = _median_time(lambda: _whole(B, factorization), repeats)
+    share = marginals.REACH_MAX_SHARE
+    marginals.REACH_MAX_SHARE = 1.0
+    try:
+        reach_s, solved = _median_time(lambda: marginals._reach_solve(factor, B), repeats)
+    finally:
+        marginals.REACH_MAX_SHARE = share
+    reach, W = solved
+    on_reach = W.T @ (W if factor.pivots is None else W / factor.pivots[reach, None])
+    entries = marginals._entries(factor.lower, reach) / factor.lower.nnz
+    return {
+        "grid": f"{dim}D {poses}",
+        "backend": backend,
+        "unknowns": problem.pattern.size,
+        "L entries": factor.lower.nnz,
+        "columns": B.shape[1],
+        "reach rows": len(reach) / problem.pattern.size,
+        "reach entries": entries,
+        "whole s": whole_s,
+        "reach s": reach_s,
+        "factor s": factor_s,
+        "whole / reach": whole_s / reach_s,
+        "default": "reach" if problem.pattern.size >= marginals.REACH_MIN_UNKNOWNS and entries <= share else "whole",
+        "max rel diff": f"{np.abs(on_reach - whole).max() / np.abs(whole).max():.1e}",
+    }
+
+
+def _whole(B, factorization) -> np.ndarray:
+    minimum = marginals.REACH_MIN_UNKNOWNS
+    marginals.REACH_MIN_UNKNOWNS = B.shape[0] + 1
+    try:
+        return marginals.quadratic_form(B, factorization)
+    finally:
+        marginals.REACH_MIN_UNKNOWNS = minimum
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--grid", default="25000,100000", help="2D grid pose counts")
+    parser.add_argument("--grid3d", default="20000", help="3D grid pose counts")
+    parser.add_argument("--loops", type=int, default=64)
+    parser.add_argument("--backends", default="cholmod" if cholmod_available() else "scipy")
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    cases = [(2, int(n)) for n in args.grid.split(",") if n] + [(3, int(n)) for n in args.grid3d.split(",") if n]
+    columns = None
+    for backend in args.backends.split(","):
+        for dim, poses in cases:
+            row = measure(dim, poses, args.loops, backend, args.repeats)
+            if columns is None:
+                columns = list(row)
+                print("| " + " | ".join(columns) + " |")
+                print("|" + "---|" * len(columns))
+            cells = [f"{value:.3f}" if isinstance(value, float) else str(value) for value in row.values()]
+            print("| " + " | ".join(cells) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
