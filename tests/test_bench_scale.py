@@ -68,3 +68,14 @@ def test_robust_speed_grid3d_rows_are_3d_grids_with_their_decisions(clean_init):
     rejected, false = (int(part) for part in row[12].split(" / "))
     assert false > 0 and rejected > 0 and int(row[10]) >= 1 and int(row[11]) >= 1  # analyses, rounds
     assert 0 <= float(row[13]) <= 1 and 0 <= float(row[14]) <= 1
+
+
+def test_reach_bench_rows_agree_with_the_whole_solve_and_say_which_path_the_default_takes():
+    options = ("--grid", "400", "--grid3d", "200", "--loops", "8", "--backends", "scipy", "--repeats", "1")
+    table = rows("bench_reach.py", *options)
+    assert [row[:2] for row in table] == [["2D 400", "scipy"], ["3D 200", "scipy"]]
+    for row in table:
+        assert int(row[4]) == 8 * (3 if row[0].startswith("2D") else 6)  # columns: d per left-out loop
+        assert 0.0 < float(row[5]) <= 1.0 and 0.0 < float(row[6]) <= 1.0  # shares of rows and entries
+        assert row[11] == "whole"  # fewer unknowns than REACH_MIN_UNKNOWNS
+        assert float(row[12]) < 1e-10
