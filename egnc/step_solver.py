@@ -60,7 +60,11 @@ from egnc.normal_equations import NormalEquationsPattern
 
 LinearMethod = Literal["auto", "direct"]
 LINEAR_METHODS = ("auto", "direct")
-_CACHED_TRUSTED_SETS = 4  # symbolic analyses kept; a stage's trusted set settles after a few steps
+_CACHED_TRUSTED_SETS = 2
+"""Trusted-set analyses a nonlinear solve keeps (a stage's trusted set settles after a few steps).
+Each holds its last factorization: about 170 MiB on a 100 000-pose grid (BENCHMARKS.md, issue 18)."""
+_CACHED_GIVEN_SETS = 4
+"""Analyses of given trusted sets kept across solves (`set_system(trusted=...)`)."""
 PATTERN_MARGIN = 1e-2
 """A trusted pattern is analysed for the edges of weight at least `PATTERN_MARGIN * trust_weight`,
 and serves every later trusted set it contains: an edge must gain this factor in weight (its
@@ -427,7 +431,7 @@ class StepSolver:
         key = np.packbits(trusted).tobytes()
         if key not in self._given_systems:
             self._given_systems[key] = self._analysed_system(trusted)
-            if len(self._given_systems) > _CACHED_TRUSTED_SETS:
+            if len(self._given_systems) > _CACHED_GIVEN_SETS:
                 self._given_systems.popitem(last=False)
         self._given_systems.move_to_end(key)
         return self._given_systems[key]
