@@ -9,7 +9,7 @@ point) `--loops` random loop closures are left out of the map, as a readmission 
 --loops` in 3D) from one factorization of the map's information, both ways:
 
 - `whole s`: forward and back solves of every column over all unknowns;
-- `reach s`: `W = L^-1 P B` on the reach of the batch's poses only, `W^T D^-1 W`;
+- `reach s`: `W = L^-1 P B` on the reach of the batch's poses only, then `W^T D^-1 W`;
 - `factor s`: exposing the factor as sparse arrays (once per factorization; not in `reach s`).
 
 `reach rows` and `reach entries` are the reach's share of the unknowns and of `L`'s stored
@@ -24,6 +24,8 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -60,16 +62,12 @@ def measure(dim: int, poses: int, loops: int, backend: str, repeats: int) -> dic
     factor_s, factor = _median_time(factorization.triangular, 1)
     if factor is None:
         raise SystemExit(f"{backend} does not expose its factor")
-    whole_s, whole = _median_time(lambda: _whole(B, factorization), repeats)
-    share = marginals.REACH_MAX_SHARE
-    marginals.REACH_MAX_SHARE = 1.0
-    try:
-        reach_s, solved = _median_time(lambda: marginals._reach_solve(factor, B), repeats)
-    finally:
-        marginals.REACH_MAX_SHARE = share
-    reach, W = solved
-    on_reach = W.T @ (W if factor.pivots is None else W / factor.pivots[reach, None])
+    whole_s, whole = _median_time(lambda: _quadratic_form(B, factorization, on_reach=False), repeats)
+    reach_s, on_reach = _median_time(lambda: _quadratic_form(B, factorization, on_reach=True), repeats)
+    with _gates(0, 1.0):
+        reach, _ = marginals._reach_solve(factor, B)
     entries = marginals._entries(factor.lower, reach) / factor.lower.nnz
+    default = problem.pattern.size >= marginals.REACH_MIN_UNKNOWNS and entries <= marginals.REACH_MAX_SHARE
     return {
         "grid": f"{dim}D {poses}",
         "backend": backend,
@@ -82,18 +80,26 @@ def measure(dim: int, poses: int, loops: int, backend: str, repeats: int) -> dic
         "reach s": reach_s,
         "factor s": factor_s,
         "whole / reach": whole_s / reach_s,
-        "default": "reach" if problem.pattern.size >= marginals.REACH_MIN_UNKNOWNS and entries <= share else "whole",
+        "default": "reach" if default else "whole",
         "max rel diff": f"{np.abs(on_reach - whole).max() / np.abs(whole).max():.1e}",
     }
 
 
-def _whole(B, factorization) -> np.ndarray:
-    minimum = marginals.REACH_MIN_UNKNOWNS
-    marginals.REACH_MIN_UNKNOWNS = B.shape[0] + 1
+@contextmanager
+def _gates(min_unknowns: float, max_share: float) -> Iterator[None]:
+    """`egnc.marginals`' reach gates set to these values for the block."""
+    saved = marginals.REACH_MIN_UNKNOWNS, marginals.REACH_MAX_SHARE
+    marginals.REACH_MIN_UNKNOWNS, marginals.REACH_MAX_SHARE = min_unknowns, max_share
     try:
-        return marginals.quadratic_form(B, factorization)
+        yield
     finally:
-        marginals.REACH_MIN_UNKNOWNS = minimum
+        marginals.REACH_MIN_UNKNOWNS, marginals.REACH_MAX_SHARE = saved
+
+
+def _quadratic_form(B, factorization, on_reach: bool) -> np.ndarray:
+    """`egnc.marginals.quadratic_form` solved on the reach (`on_reach`) or whole, whatever the gates say."""
+    with _gates(0, 1.0) if on_reach else _gates(np.inf, marginals.REACH_MAX_SHARE):
+        return marginals.quadratic_form(B, factorization)
 
 
 def main() -> None:

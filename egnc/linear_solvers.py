@@ -33,6 +33,10 @@ orders the scalar matrix itself.
   the OpenBLAS bundled with SciPy for every supernode, and waking its worker for each call took
   about 100x the arithmetic on 2 shared cores (BENCHMARKS.md, issue 18). SciPy has no sparse
   Cholesky; this is the always-available fallback.
+
+A factorization solves (`Factorization.__call__`) and, for `cholmod` and `scipy`, exposes its
+factor as sparse arrays (`Factorization.triangular`, a `TriangularFactor`), which
+`egnc.marginals` uses to solve only the part of a triangular system a few columns reach.
 """
 
 from __future__ import annotations
@@ -437,7 +441,7 @@ class RslabSolver:
             rhs = np.ascontiguousarray(rhs, dtype=np.float64)
             return factor.solve(rhs) if rhs.ndim == 1 else factor.solve_many(rhs)
 
-        return SolveOnly(solve)
+        return _SolveOnly(solve)
 
 
 class ScipySolver:
@@ -494,7 +498,7 @@ class _SuperLUFactorization:
         return self._triangular
 
 
-class SolveOnly:
+class _SolveOnly:
     """A factorization known only by its solve: `triangular()` is None."""
 
     def __init__(self, solve: Callable[[np.ndarray], np.ndarray]):
