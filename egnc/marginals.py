@@ -48,9 +48,9 @@ exposing the factor and importing SciPy's triangular solver (BENCHMARKS.md, issu
 
 REACH_MAX_SHARE = 0.4
 """The reach solve is used when the columns of `L` on the reach hold at most this share of its
-entries. Per entry and right-hand side it costs about 0.55 ns here, a backend's whole solve
-(forward and back) 0.22 ns (CHOLMOD on a 3D grid's large supernodes) to 1.3 ns (SuperLU); below
-0.4 the reach is never the slower (BENCHMARKS.md, issue 18)."""
+entries. Per entry and right-hand side it costs 0.53-0.62 ns here, a backend's whole solve
+(forward and back) 0.22 ns (CHOLMOD on a 3D grid's large supernodes) to 1.2 ns (SuperLU): at
+0.4 the reach costs about what the fastest whole solve does (BENCHMARKS.md, issue 18)."""
 
 
 def covariance_solver(problem: Problem, poses: np.ndarray) -> Factorization:
