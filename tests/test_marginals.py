@@ -130,3 +130,17 @@ def test_innovations_of_a_problem_in_block_order_are_the_same_on_the_reach(backe
     on_reach = innovations(problem, poses, loops)[1]
     assert reached == ([] if backend == "rslab" else [True])
     np.testing.assert_allclose(on_reach, whole, rtol=1e-9, atol=1e-12)
+
+
+def test_columns_without_entries_have_zero_covariance_on_the_reach(monkeypatch):
+    # A loop between two fixed poses has no unknowns: its columns of B are empty.
+    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    matrix = chain_with_branches(30, seed=6)
+    factorization = factorized("scipy", matrix)
+    empty = sp.csc_matrix((30, 3))
+    np.testing.assert_array_equal(quadratic_form(empty, factorization), np.zeros((3, 3)))
+    B = sp.hstack([sp.csc_matrix(np.eye(30)[:, [4]]), empty], format="csc")
+    expected = np.zeros((4, 4))
+    expected[0, 0] = np.linalg.inv(matrix)[4, 4]
+    np.testing.assert_allclose(quadratic_form(B, factorization), expected, rtol=1e-10, atol=1e-14)
