@@ -376,29 +376,22 @@ class CholmodSolver:
                 self.factor.cholesky_inplace(_matrix(data, self._indices, self._indptr))
             except self._cholmod.CholmodNotPositiveDefiniteError as error:
                 raise NotPositiveDefiniteError(f"normal equations are not positive definite ({error})") from None
-        return _CholmodFactorization(self.factor)
+        factor = self.factor
 
-
-class _CholmodFactorization:
-    """A CHOLMOD `Factor` as a `Factorization`."""
-
-    def __init__(self, factor: Any):
-        self._factor = factor
-        self._triangular: TriangularFactor | None = None
-
-    def __call__(self, rhs: np.ndarray) -> np.ndarray:
-        with serial_native_threads():
-            return self._factor(rhs)
-
-    def triangular(self) -> TriangularFactor:
-        """`L` of `A = P^T L L^T P`, from a copy (converting the analysed factor would make its later
-        factorizations simplicial)."""
-        if self._triangular is None:
+        def solve(rhs: np.ndarray) -> np.ndarray:
             with serial_native_threads():
-                lower = sp.csc_matrix(self._factor.copy().L())
-            lower.sort_indices()
-            self._triangular = TriangularFactor(lower, np.asarray(self._factor.P(), dtype=np.int64), None)
-        return self._triangular
+                return factor(rhs)
+
+        return _Factorization(solve, lambda: _cholmod_triangular(factor))
+
+
+def _cholmod_triangular(factor: Any) -> TriangularFactor:
+    """`L` of `A = P^T L L^T P` from a CHOLMOD `Factor`, through a copy (converting the analysed
+    factor itself would make its later factorizations simplicial)."""
+    with serial_native_threads():
+        lower = sp.csc_matrix(factor.copy().L())
+    lower.sort_indices()
+    return TriangularFactor(lower, np.asarray(factor.P(), dtype=np.int64), None)
 
 
 class RslabSolver:
@@ -441,7 +434,7 @@ class RslabSolver:
             rhs = np.ascontiguousarray(rhs, dtype=np.float64)
             return factor.solve(rhs) if rhs.ndim == 1 else factor.solve_many(rhs)
 
-        return _SolveOnly(solve)
+        return _Factorization(solve)
 
 
 class ScipySolver:
@@ -473,43 +466,46 @@ class ScipySolver:
                 )
         except RuntimeError as error:  # SuperLU reports an exactly singular factor this way
             raise NotPositiveDefiniteError(f"normal equations are singular ({error})") from None
-        return _SuperLUFactorization(lu)
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            with serial_native_threads():
+                return lu.solve(rhs)
+
+        return _Factorization(solve, lambda: _superlu_triangular(lu))
 
 
-class _SuperLUFactorization:
-    """A SuperLU factorization in symmetric mode as a `Factorization`."""
-
-    def __init__(self, lu: Any):
-        self._lu = lu
-        self._triangular: TriangularFactor | None = None
-
-    def __call__(self, rhs: np.ndarray) -> np.ndarray:
-        with serial_native_threads():
-            return self._lu.solve(rhs)
-
-    def triangular(self) -> TriangularFactor | None:
-        """`P_r A P_c = L U` with diagonal pivots: `P_r = P_c` and `U = D L^T` for a symmetric `A`
-        (None when a pivot left the diagonal)."""
-        lu = self._lu
-        if self._triangular is None and np.array_equal(lu.perm_r, lu.perm_c):
-            lower = sp.csc_matrix(lu.L)
-            lower.sort_indices()
-            self._triangular = TriangularFactor(lower, np.argsort(lu.perm_r).astype(np.int64), lu.U.diagonal())
-        return self._triangular
+def _superlu_triangular(lu: Any) -> TriangularFactor | None:
+    """`P_r A P_c = L U` of SuperLU with diagonal pivots: `P_r = P_c` and `U = D L^T` for a
+    symmetric `A` (None when a pivot left the diagonal)."""
+    if not np.array_equal(lu.perm_r, lu.perm_c):
+        return None
+    lower = sp.csc_matrix(lu.L)
+    lower.sort_indices()
+    return TriangularFactor(lower, np.argsort(lu.perm_r).astype(np.int64), lu.U.diagonal())
 
 
-class _SolveOnly:
-    """A factorization known only by its solve: `triangular()` is None."""
+class _Factorization:
+    """A `Factorization` from its solve and, where the backend exposes its factor, the function
+    that builds the factor's sparse arrays (called once, on the first `triangular()`)."""
 
-    def __init__(self, solve: Callable[[np.ndarray], np.ndarray]):
+    def __init__(
+        self,
+        solve: Callable[[np.ndarray], np.ndarray],
+        build_triangular: Callable[[], TriangularFactor | None] | None = None,
+    ):
         self._solve = solve
+        self._build_triangular = build_triangular
+        self._triangular: TriangularFactor | None = None
 
     def __call__(self, rhs: np.ndarray) -> np.ndarray:
         return self._solve(rhs)
 
-    def triangular(self) -> None:
-        """None: the factor is not exposed."""
-        return None
+    def triangular(self) -> TriangularFactor | None:
+        """The factor as sparse arrays, or None where the backend does not expose it."""
+        if self._triangular is None and self._build_triangular is not None:
+            self._triangular = self._build_triangular()
+            self._build_triangular = None  # built, or not exposed: never again
+        return self._triangular
 
 
 def make_linear_solver(name: str, indptr: np.ndarray, indices: np.ndarray, ordered: bool = False) -> LinearSolver:
