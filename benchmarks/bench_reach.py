@@ -55,8 +55,8 @@ def measure(dim: int, poses: int, loops: int, backend: str, repeats: int) -> dic
     matrices = to_matrices(dim, graph.poses)
     batch = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
     linearization = batch.linearize(matrices)
-    B = marginals._transposed_jacobians(
-        problem, batch.edges, np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
+    B = marginals.transposed_jacobians(
+        problem.pattern, batch.edges, np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
     )
     factorization = marginals.covariance_solver(problem, matrices)
     factor_s, factor = _median_time(factorization.triangular, 1)

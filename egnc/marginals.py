@@ -38,6 +38,7 @@ import scipy.sparse as sp
 from egnc.factors import BetweenFactors
 from egnc.least_squares import Problem
 from egnc.linear_solvers import Factorization, TriangularFactor, serial_native_threads
+from egnc.normal_equations import NormalEquationsPattern
 
 _MAX_RHS_VALUES = 2**24
 """Largest `n x columns` right-hand side solved at once (128 MiB of float64)."""
@@ -65,16 +66,16 @@ def covariance_solver(problem: Problem, poses: np.ndarray) -> Factorization:
     return problem.linear_solver.factorize(data)
 
 
-def _transposed_jacobians(problem: Problem, rows: np.ndarray, blocks: np.ndarray) -> sp.csc_matrix:
-    """Sparse `(n, K d)` matrix `B` whose `k`-th group of `d` columns is `A_k^T`.
+def transposed_jacobians(pattern: NormalEquationsPattern, rows: np.ndarray, blocks: np.ndarray) -> sp.csc_matrix:
+    """Sparse `(n, K d)` matrix `B` whose `k`-th group of `d` columns is `A_k^T`; repeated rows add up.
 
     Args:
-        problem: gives the unknowns' layout.
+        pattern: gives the unknowns' layout (`free_index`, `size`).
         rows: `(K, m)` pose rows each query depends on.
         blocks: `(K, m, d, d)` the query's Jacobian block `A_k` for each of those poses (output by
             pose tangent); blocks of fixed poses are dropped (they carry no unknowns).
     """
-    free_index = problem.pattern.free_index
+    free_index = pattern.free_index
     num_queries, d = len(rows), blocks.shape[-1]
     columns = np.arange(num_queries)[:, None] * d + np.arange(d)  # (K, d)
     row_parts, column_parts, value_parts = [], [], []
@@ -89,7 +90,7 @@ def _transposed_jacobians(problem: Problem, rows: np.ndarray, blocks: np.ndarray
         value_parts.append(np.swapaxes(blocks[free, side], 1, 2).ravel())
     return sp.csc_matrix(
         (np.concatenate(value_parts), (np.concatenate(row_parts), np.concatenate(column_parts))),
-        shape=(problem.pattern.size, num_queries * d),
+        shape=(pattern.size, num_queries * d),
     )
 
 
@@ -115,8 +116,8 @@ def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> n
     d = problem.graph.tangent_dim
     if not problem.pattern.size:
         return np.zeros((len(rows), d, d))
-    B = _transposed_jacobians(problem, rows[:, None], np.broadcast_to(np.eye(d), (len(rows), 1, d, d)))
-    return _diagonal_blocks(B, covariance_solver(problem, poses), d)
+    B = transposed_jacobians(problem.pattern, rows[:, None], np.broadcast_to(np.eye(d), (len(rows), 1, d, d)))
+    return diagonal_blocks(B, covariance_solver(problem, poses), d)
 
 
 def relative_covariances(problem: Problem, poses: np.ndarray, loops: BetweenFactors) -> np.ndarray:
@@ -134,11 +135,11 @@ def relative_covariances(problem: Problem, poses: np.ndarray, loops: BetweenFact
         return np.zeros((len(loops.edges), d, d))
     linearization = loops.linearize(poses)
     blocks = np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
-    B = _transposed_jacobians(problem, loops.edges, blocks)
-    return _diagonal_blocks(B, covariance_solver(problem, poses), d)
+    B = transposed_jacobians(problem.pattern, loops.edges, blocks)
+    return diagonal_blocks(B, covariance_solver(problem, poses), d)
 
 
-def _diagonal_blocks(B: sp.csc_matrix, covariance_solve: Callable[[np.ndarray], np.ndarray], d: int) -> np.ndarray:
+def diagonal_blocks(B: sp.csc_matrix, covariance_solve: Callable[[np.ndarray], np.ndarray], d: int) -> np.ndarray:
     """`(K, d, d)` the diagonal `d x d` blocks of `B^T H^-1 B`, symmetrized, for `B` `(n, K d)`."""
     out = np.zeros((B.shape[1] // d, d, d))
     for columns, X in _solved_columns(B, covariance_solve, d):
@@ -174,7 +175,7 @@ def innovations(
     S = np.zeros((e.size, e.size))
     if problem.pattern.size and len(e):
         blocks = np.stack([linearization.J_e_xi, linearization.J_e_xj], axis=1)
-        B = _transposed_jacobians(problem, loops.edges, blocks)
+        B = transposed_jacobians(problem.pattern, loops.edges, blocks)
         if covariance_solve is None:
             covariance_solve = covariance_solver(problem, poses)
         S = quadratic_form(B, covariance_solve)

@@ -221,7 +221,7 @@ class _InBlockOrder:
 
 
 class _PermutedFactorization:
-    """The factorization of `A[unknowns][:, unknowns]` as one of `A` (`_InBlockOrder`)."""
+    """The factorization of `A[unknowns][:, unknowns]` as one of `A` (`_InBlockOrder`, a trusted system)."""
 
     def __init__(self, ordered: Factorization, unknowns: np.ndarray):
         self._ordered = ordered
@@ -350,6 +350,22 @@ class StepSolver:
         damped = self._data.copy()
         damped[self.pattern.diagonal_slots] += shift
         return self.direct_solver.solve(damped, rhs)
+
+    def trusted_factorization(self, products: np.ndarray, trusted: np.ndarray) -> Factorization | None:
+        """The factorization of `H_T`, the sum of exactly the `trusted` `(E,)` edges' `products`
+        (`(E, 2d, 2d + 1)`, `egnc.normal_equations.edge_products`), undamped, over this system's unknowns.
+
+        It reuses the analysis `set_system(trusted=...)` made for the same set. None when those
+        edges leave a pose unconstrained or `H_T` is not positive definite.
+        """
+        system = self._given_system(trusted)
+        if system is None:
+            return None
+        try:
+            factorization = system.solver.factorize(system.pattern.scatter(products[system.edges])[0])
+        except NotPositiveDefiniteError:
+            return None
+        return _PermutedFactorization(factorization, system.unknowns)
 
     def _conjugate_gradients(
         self, trusted: _TrustedSystem, shift: np.ndarray, rhs: np.ndarray, tol: float, max_iterations: int
