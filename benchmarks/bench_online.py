@@ -2,7 +2,8 @@
 
     python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
-        [--regraduate reference|new] [--region-hops N] [--strong-at-arrival] [--rel-cost-tol TOL] [--linear-solver auto]
+        [--regraduate reference|new] [--region-hops N] [--strong-at-arrival] [--no-decide-at-arrival]
+        [--rel-cost-tol TOL] [--linear-solver auto]
         [--json results.jsonl]
 
 For every dataset and percentage, the clean graph's least-squares optimum is the reference; the
@@ -17,7 +18,8 @@ Columns:
   (`OnlineSolver.inliers`, the chi-square test at the robust estimate).
 - `ATE`: of the final result against the reference, metres, after rigid alignment; `ATE now`:
   of the online estimate before it (`OnlineSolver.poses`).
-- `updates`: updates (one per new pose); `loop updates`: those that added a loop closure.
+- `updates`: updates (one per new pose); `loop updates`: those that added a loop closure;
+  `decided`: those decided at arrival (`UpdateReport.decided_at_arrival`: nothing solved).
 - `iterations`: accepted solver steps summed over all updates (the final decision excluded).
 - `total s`: sum of the update times (reading, reference, final decision excluded);
   `decide s`: the final decision (`result()`: from the online estimate and from the batch solve);
@@ -53,10 +55,19 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         regraduate=args.regraduate,
         stage_iterations=args.stage_iterations or None,
         strong_at_arrival=args.strong_at_arrival,
+        decide_at_arrival=not args.no_decide_at_arrival,
         region_hops=args.region_hops or None,
         **({} if args.rel_cost_tol is None else {"rel_cost_tol": args.rel_cost_tol}),
     )
-    outcome = replay(graph, method, known_inliers=known, linear_solver=args.linear_solver, online_options=options)
+    decided = []
+    outcome = replay(
+        graph,
+        method,
+        known_inliers=known,
+        linear_solver=args.linear_solver,
+        online_options=options,
+        on_step=lambda step, total, report: decided.append(report.decided_at_arrival),
+    )
     steps = replay_steps(graph, known)
     # The running decision, in file order (the result already is): edge k of the solver is inserted[k].
     inserted = np.concatenate(steps)
@@ -82,6 +93,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         "ate_now": ate(now_poses, reference, graph.dim),
         "updates": int(outcome.steps),
         "loop_updates": int(has_loop.sum()),
+        "decided": int(np.sum(decided)),
         "iterations": int(iterations.sum()),
         "total_s": float(outcome.total_s),
         "decide_s": decide_s,
@@ -113,7 +125,8 @@ def cases(args: argparse.Namespace):
 
 
 HEADER = (
-    "| dataset | % | method | P | R | P now | R now | ATE (m) | ATE now (m) | updates | loop updates | iterations"
+    "| dataset | % | method | P | R | P now | R now | ATE (m) | ATE now (m) | updates | loop updates | decided"
+    " | iterations"
     " | total s | decide s | kept | p50 ms | p99 ms | max ms | loop p50 ms | ratio time / iterations |"
 )
 
@@ -129,6 +142,11 @@ def main() -> int:
     parser.add_argument("--region-hops", type=int, default=0, help="OnlineOptions.region_hops; 0: the whole map")
     parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
     parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
+    parser.add_argument(
+        "--no-decide-at-arrival",
+        action="store_true",
+        help="OnlineOptions(decide_at_arrival=False): every loop update solves",
+    )
     parser.add_argument(
         "--rel-cost-tol", type=float, help="OnlineOptions.rel_cost_tol (default: its default): where an update stops"
     )
@@ -156,7 +174,7 @@ def main() -> int:
             print(
                 f"| {name} | {percent:.0f} | {row['method']} | {row['P']:.4f} | {row['R']:.4f} | {row['P_now']:.4f}"
                 f" | {row['R_now']:.4f} | {row['ate']:.4f} | {row['ate_now']:.4f} | {row['updates']}"
-                f" | {row['loop_updates']}"
+                f" | {row['loop_updates']} | {row['decided']}"
                 f" | {row['iterations']} | {row['total_s']:.1f} | {row['decide_s']:.2f} | {row['kept']}"
                 f" | {row['p50']:.1f} | {row['p99']:.1f} | {row['max']:.1f} | {row['loop_p50']:.1f} | {ratio} |",
                 flush=True,

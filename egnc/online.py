@@ -31,7 +31,14 @@ accepted loops, re-test, re-admission by innovation) on the current estimate.
 
 What an update costs follows what changed: new poses are placed by composing their odometry from
 the current estimate, so an update that only extends the trajectory leaves every residual
-at the optimum and solves nothing. An update with a loop closure solves the whole map. With
+at the optimum and solves nothing. An update with a loop closure solves the whole map, unless it
+is decided at arrival (`egnc` schedule, `OnlineOptions.decide_at_arrival`): its first stage (one
+Gauss-Newton step with the new loops at `mu = 0`) is predicted from a factorization of the map
+kept from the last whole-map solve (`egnc.arrival`), and when that stage would leave every new
+loop strong, the bent map would cost no less at `mu = 1` than the map before it, the last stage
+predicted from there (the new loops' IRLS with the rest of the map held) lets them go, and their
+pull on the map is below the update's tolerance, the update ends where it starts: the new loops
+are set to `mu = 1` and nothing is solved. With
 `OnlineOptions.region_hops` it first solves the poses within that many trusted edges of the new
 edges' ends, the poses around them held (`egnc.region`), and falls back to the whole map when
 the region's result is in doubt: when a loop closure crosses the strong-outlier line in the
@@ -65,6 +72,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from egnc.api import Result, decided_fields, solve
+from egnc.arrival import ConvergedMap, FirstStage
 from egnc.decision import decide_outliers
 from egnc.errors import EgncError, GraphError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
@@ -123,6 +131,10 @@ class OnlineOptions:
             after a solve; it skips the `mu = 0` stage, where a false loop would bend the map.
             Off by default (EGNC-PGO starts every new loop at 0): drifted odometry puts true
             loops far off at arrival too (docs/online.md has the measurements).
+        decide_at_arrival: `egnc` only: predict an update's first stage (one Gauss-Newton step
+            with its new loops at `mu = 0`) from the map factorized after the last whole-map solve
+            (`egnc.arrival`), and solve nothing when the update would end where it starts, with
+            its new loops off (module docstring; docs/online.md has the measurements).
         rel_cost_tol: the last stage of an update stops when an accepted step lowers the cost
             by at most this fraction (riSAM stops at 1e-2; docs/online.md says how the default
             was chosen).
@@ -139,6 +151,7 @@ class OnlineOptions:
     high_quantile: float = 0.9
     stage_iterations: int | None = 1
     strong_at_arrival: bool = False
+    decide_at_arrival: bool = True
     rel_cost_tol: float = 1e-4
     region_hops: int | None = None
 
@@ -164,9 +177,12 @@ class UpdateReport:
         new_poses: poses added by the update.
         new_edges: `(K,)` indices of the edges it added (odometry and loops, in insertion order).
         new_loops: `(L,)` indices of the loop closures it added.
+        decided_at_arrival: whether the update solved nothing because its stages, predicted from
+            the map factorized after the last solve, would end where it started with its new loops
+            off (`OnlineOptions.decide_at_arrival`); its new loops are then at `mu = 1`.
         graduated: loop closures graduated by the update (the new ones and, with
             `regraduate="reference"`, older ones whose `mu_init` is 0).
-        stages: one report per solve (empty when nothing needed solving).
+        stages: one report per solve (empty when nothing needed solving or `decided_at_arrival`).
         mu_history: `(S, L)` `mu` of each new loop closure in each stage.
         residual_history: `(S, L)` whitened residual norm `r` of each new loop closure after
             each stage (what the next stage's `mu` was chosen from).
@@ -185,6 +201,7 @@ class UpdateReport:
     new_poses: int
     new_edges: np.ndarray
     new_loops: np.ndarray
+    decided_at_arrival: bool
     graduated: int
     stages: tuple[StageReport, ...]
     mu_history: np.ndarray
@@ -288,6 +305,7 @@ class OnlineSolver:
         self._known_ids: set[int] = set()
         self._problem: Problem | None = None
         self._factors: BetweenFactors | None = None
+        self._converged: ConvergedMap | None = None  # the map after its last whole-map solve (egnc.arrival)
         self._last_status = -1
         self.last_update: UpdateReport | None = None
 
@@ -398,18 +416,32 @@ class OnlineSolver:
         needs_solve = prior_moved or len(new_loops) > 0 or len(moving) > 0
         graduating = np.zeros(len(self._edges), dtype=bool)
         outcome = _Graduation((), np.zeros((0, len(new_loops))), np.zeros((0, len(new_loops))), -1)
-        if needs_solve:
+        # New loops alone have moved nothing yet: the map factorized after the last solve holds.
+        only_loops = needs_solve and not prior_moved and bool(np.all(self._robust[moving]))
+        first = self._first_stage(new_loops, num_old_poses, num_old_edges) if only_loops else None
+        decided = first is not None and self._decided_at_arrival(new_loops, first)
+        if decided:
+            self._mu_init[new_loops] = self._mu[new_loops] = 1.0
+        elif needs_solve:
             graduating = self._graduating(new_loops)
             # A moved gauge moves the whole map; otherwise the change starts at the ends of the new edges.
             seeds = None if prior_moved else np.unique(self._edges[np.union1d(new_loops, moving)])
-            outcome = self._graduate(graduating, new_loops, seeds)
+            # One preconditioner for all stages of the update (one analysis): the edges whose weight
+            # is at least trust_weight at its start, the new loops (at mu_init) included, so that CG
+            # has only the switched-off loops left to resolve.
+            weights = KernelLoss(self._kernel, self._mu, self._robust).weight(self._r)
+            trusted = weights >= self.options.trust_weight
+            outcome = self._graduate(graduating, new_loops, seeds, trusted)
             self._reset_mu_init()
+            solved_whole = outcome.whole_map and outcome.status != NUMERICAL_FAILURE
+            self._converged = self._factorize_map(trusted) if solved_whole else None
         stages, status = outcome.reports, outcome.status
         report = UpdateReport(
             step=self._steps,
             new_poses=len(self._vertex_ids) - num_old_poses,
             new_edges=new_edges,
             new_loops=new_loops,
+            decided_at_arrival=decided,
             graduated=int(graduating.sum()),
             stages=stages,
             mu_history=outcome.mu_history,
@@ -494,17 +526,19 @@ class OnlineSolver:
             self._factors = BetweenFactors(self.dim, self._edges, self._Z_inv, self._information)
         return self._factors
 
-    def _graph(self) -> PoseGraph:
-        """The current graph in insertion (row) order, poses at the current estimate."""
-        fixed = np.zeros(len(self._vertex_ids), dtype=bool)
+    def _graph(self, num_poses: int | None = None, num_edges: int | None = None) -> PoseGraph:
+        """The current graph in insertion (row) order, poses at the current estimate; or the
+        graph of its first `num_poses` poses and `num_edges` edges."""
+        poses, edges = slice(num_poses), slice(num_edges)
+        fixed = np.zeros(len(self._vertex_ids[poses]), dtype=bool)
         fixed[self._gauge] = self._gauge != 0  # the solver fixes row 0 itself
         return PoseGraph(
             dim=self.dim,
-            vertex_ids=self._vertex_ids,
-            poses=from_matrices(self.dim, self._T),
-            edges=self._edges,
-            measurements=self._measurements,
-            information=self._information,
+            vertex_ids=self._vertex_ids[poses],
+            poses=from_matrices(self.dim, self._T[poses]),
+            edges=self._edges[edges],
+            measurements=self._measurements[edges],
+            information=self._information[edges],
             fixed=fixed,
         )
 
@@ -515,6 +549,55 @@ class OnlineSolver:
                 self._graph(), self.linear_solver, self._current_factors(), fill_reducing=False
             )
         return self._problem
+
+    def _first_stage(self, new_loops: np.ndarray, num_old_poses: int, num_old_edges: int) -> FirstStage | None:
+        """The update's first stage predicted from the map factorized after the last whole-map
+        solve (`egnc.arrival`), or, when there is none, from the map as it was before this update
+        (its first `num_old_poses` poses and `num_old_edges` edges); None where not predicted."""
+        if not len(new_loops) or not num_old_poses or not self._predicts_first_stage():
+            return None
+        if self._converged is None:
+            old = np.arange(num_old_edges)
+            weights = KernelLoss(self._kernel, self._mu[old], self._robust[old]).weight(self._r[old])
+            problem = self._prefix_problem(num_old_poses, num_old_edges)
+            self._converged = self._factorize_map(weights >= self.options.trust_weight, problem)
+        if self._converged is None:
+            return None
+        weights = self._kernel.weight(self._r[new_loops], np.zeros(len(new_loops)))
+        return self._converged.first_stage(self._current_factors(), self._T, self._robust, new_loops, weights)
+
+    def _predicts_first_stage(self) -> bool:
+        return self.method == "egnc" and self.online_options.decide_at_arrival
+
+    def _decided_at_arrival(self, new_loops: np.ndarray, first: FirstStage) -> bool:
+        """Whether the update would end where it starts, with its new loops off: the predicted
+        first stage finds every new loop strong (EGNC then weighs them at `mu = 1` from the stage's
+        bent map), the bent map costs no less at `mu = 1` than the map before it (so the last
+        stage would not descend from lower ground than the start), and the new loops' pull there
+        would lower the cost by less than the last stage's tolerance."""
+        far = exceeds(first.residual_norms, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+        if not far[new_loops].all():
+            return False
+        mu = self._mu.copy()
+        mu[new_loops] = 1.0
+        loss = KernelLoss(self._kernel, mu, self._robust)
+        cost = float(np.sum(loss.cost(self._r)))
+        if float(np.sum(loss.cost(first.residual_norms))) < cost:
+            return False
+        information = self._information[new_loops]
+        settled = first.last_stage(information, loss.subset(new_loops).weight, first.residual_norms[new_loops])
+        if not exceeds(settled, self.online_options.high_quantile, self._d, self.gnc_options.threshold).all():
+            return False
+        weights = loss.subset(new_loops).weight(self._r[new_loops])
+        bound = first.largest_decrease(weights, self._information[new_loops])
+        return bound <= self._stage_options()[0].rel_cost_tol * cost
+
+    def _prefix_problem(self, num_poses: int, num_edges: int) -> Problem:
+        """The problem of the graph's first `num_poses` poses and `num_edges` edges, as
+        `_current_problem` built it when the graph had those."""
+        edges = slice(num_edges)
+        factors = BetweenFactors(self.dim, self._edges[edges], self._Z_inv[edges], self._information[edges])
+        return Problem.from_graph(self._graph(num_poses, num_edges), self.linear_solver, factors, fill_reducing=False)
 
     def _graduating(self, new_loops: np.ndarray) -> np.ndarray:
         """`(E,)` bool: the loops this update graduates from `mu_init` (module docstring)."""
@@ -531,12 +614,21 @@ class OnlineSolver:
             graduating |= self._robust & (self._mu_init == 0.0)
         return graduating
 
-    def _graduate(self, graduating: np.ndarray, new_loops: np.ndarray, seeds: np.ndarray | None) -> _Graduation:
-        """Run the stages of one update around `seeds` (pose rows; None: the whole map)."""
-        # One preconditioner for all stages of the update (one analysis): the edges whose weight is
-        # at least trust_weight at its start, the new loops (at mu_init) included, so that CG has
-        # only the switched-off loops left to resolve.
-        trusted = KernelLoss(self._kernel, self._mu, self._robust).weight(self._r) >= self.options.trust_weight
+    def _factorize_map(self, trusted: np.ndarray, problem: Problem | None = None) -> ConvergedMap | None:
+        """The map's information factorized at the current estimate over the `trusted` edges, for
+        the next updates' first-stage predictions; `problem`: the map's (default: the current one)."""
+        if not self._predicts_first_stage():
+            return None
+        problem = problem or self._current_problem()
+        num_edges = len(trusted)
+        weights = KernelLoss(self._kernel, self._mu[:num_edges], self._robust[:num_edges]).weight(self._r[:num_edges])
+        return ConvergedMap.factorize(problem, self._T[: problem.graph.num_poses], weights, trusted)
+
+    def _graduate(
+        self, graduating: np.ndarray, new_loops: np.ndarray, seeds: np.ndarray | None, trusted: np.ndarray
+    ) -> _Graduation:
+        """Run the stages of one update around `seeds` (pose rows; None: the whole map) with the
+        preconditioner of the `trusted` `(E,)` edges."""
         hops = self.online_options.region_hops
         local = neighbourhoods = None
         if seeds is not None and hops is not None:
@@ -951,6 +1043,8 @@ class OnlineSolver:
             "has_prior": self._has_prior,
             "steps": self._steps,
             "last_status": self._last_status,
+            # The factorized map is rebuilt on load from the state it was factorized at (its first poses and edges).
+            "converged_poses": None if self._converged is None else self._converged.num_poses,
             "meta": meta or {},
         }
         arrays = {
@@ -965,6 +1059,7 @@ class OnlineSolver:
             "mu": self._mu,
             "mu_init": self._mu_init,
             "r": self._r,
+            "converged_trusted": np.zeros(0, dtype=bool) if self._converged is None else self._converged.trusted,
             "update_ms": np.array(self._update_ms),
             "update_iterations": np.array(self._update_iterations, dtype=np.int64),
         }
@@ -1006,6 +1101,10 @@ class OnlineSolver:
         solver._update_iterations = arrays["update_iterations"].tolist()
         solver._gauge, solver._has_prior = settings["gauge"], settings["has_prior"]
         solver._steps, solver._last_status = settings["steps"], settings["last_status"]
+        if settings.get("converged_poses") is not None:
+            trusted = arrays["converged_trusted"]
+            problem = solver._prefix_problem(settings["converged_poses"], len(trusted))
+            solver._converged = solver._factorize_map(trusted, problem)
         return solver, settings["meta"]
 
 

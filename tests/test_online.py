@@ -96,9 +96,11 @@ def test_odometry_between_known_poses_is_solved_without_graduation():
     assert solver.residual_norms[-1] > 0.1 and solver.rejected.size == 0
 
 
-def _chain(method: str, linear_solver: str = "auto", regraduate: str = "reference") -> tuple[OnlineSolver, np.ndarray]:
+def _chain(
+    method: str, linear_solver: str = "auto", regraduate: str = "reference", decide_at_arrival: bool = True
+) -> tuple[OnlineSolver, np.ndarray]:
     """Eleven poses along x, 1 m apart; the x variance between pose 0 and 10 is 0.01 m^2 by odometry."""
-    options = OnlineOptions(regraduate=regraduate)  # type: ignore[arg-type]
+    options = OnlineOptions(regraduate=regraduate, decide_at_arrival=decide_at_arrival)  # type: ignore[arg-type]
     solver = OnlineSolver(2, method, linear_solver=linear_solver, online_options=options)
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(10):
@@ -154,13 +156,13 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
     report = solver.update()
     np.testing.assert_allclose(report.mu_history[:, 0], RISAM_SEQUENCE, atol=1e-12)
 
-    solver, information = _chain("egnc")
+    solver, information = _chain("egnc", decide_at_arrival=False)
     gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
     report = solver.update()
     assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after its first stage: skips mu*
     assert gross in solver.rejected
 
-    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=True))
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=True, decide_at_arrival=False))
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(10):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
@@ -171,7 +173,7 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
 
     # Stiff odometry (x variance 1e-4 m^2 from pose 0 to 10): the loop's residual hardly shrinks at
     # mu = 0, and r = 2.2 lies between c / sqrt(3) = 1.73 and the strong threshold sqrt(6.25) = 2.5.
-    solver = OnlineSolver(2, "egnc")
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(decide_at_arrival=False))
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(10):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1e5, 1e4, 1e4]))
@@ -184,6 +186,90 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
     # mu* is the convexity boundary at the residual the first stage left (residual_history).
     assert report.residual_history.shape == report.mu_history.shape
     assert history[1] == pytest.approx(float(mu_star(report.residual_history[0, :1], 3.0)[0]), rel=1e-12)
+
+
+def _first_stage_residual(solver: OnlineSolver, loop: int) -> float:
+    """The residual `r` of `loop` after the pending update's first stage, solved (not predicted)."""
+    report = solver.update()
+    assert not report.decided_at_arrival and report.new_loops.tolist() == [loop]
+    return float(report.residual_history[0, 0])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_predicted_first_stage_is_the_solved_one(dim):
+    """A loop to a pose added after the last solve (hung from the map by its odometry): the first
+    stage predicted from the map factorized at the end of that solve equals the solved stage."""
+    odometry, information = _square(dim)
+    runs = {}
+    for decide in (True, False):
+        solver = OnlineSolver(dim, "egnc", online_options=OnlineOptions(decide_at_arrival=decide))
+        solver.add_prior(0, from_matrices(dim, np.eye(dim + 1)))
+        for k in range(3):
+            solver.add_odometry(k, k + 1, odometry[k], information)
+        solver.add_loop(3, 0, odometry[3], information)
+        solver.update()  # solved: the map is factorized at its end
+        for k in range(3, 6):  # three poses hung from pose 3 by odometry
+            solver.add_odometry(k, k + 1, odometry[k % 4], information)
+        solver.update()
+        T = to_matrices(dim, solver.poses)
+        wrong = np.linalg.inv(T[2]) @ T[6] @ group_of(dim).exp(np.full((1, len(information)), 0.05))[0]  # r^2 = 5
+        loop = solver.add_loop(2, 6, from_matrices(dim, wrong[None])[0], information)
+        runs[decide] = (solver, loop)
+    solver, loop = runs[True]
+    predicted = []
+    predict = solver._first_stage
+    solver._first_stage = lambda *args: predicted.append(predict(*args)) or predicted[-1]  # type: ignore[method-assign]
+    assert not solver.update().decided_at_arrival
+    first = predicted[0]
+    assert first is not None
+    # To 2 %: the stage re-graduates the older loop to mu = 0 (weight 0.9), the factorized map holds
+    # it at its Geman-McClure weight (1 at r = 0).
+    assert first.residual_norms[loop] == pytest.approx(_first_stage_residual(*runs[False]), rel=2e-2)
+    offset = np.full(len(information), 0.05)
+    assert first.residual_norms[loop] < 0.8 * np.sqrt(offset @ information @ offset)  # the stage moved it
+
+
+def test_a_gross_loop_is_decided_at_arrival_without_a_solve():
+    solver, information = _chain("egnc")
+    solver.add_loop(0, 10, [10.05, 0.0, 0.0], information)
+    assert not solver.update().decided_at_arrival  # a loop that fits is graduated
+    before = solver.poses
+    gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
+    report = solver.update()
+    assert report.decided_at_arrival and report.stages == () and report.iterations == 0
+    np.testing.assert_array_equal(solver.poses, before)
+    assert gross in solver.rejected and solver.mu[gross] == 1.0
+    # The same update solved reaches the same map, to the last stage's tolerance.
+    solved, _ = _chain("egnc", decide_at_arrival=False)
+    solved.add_loop(0, 10, [10.05, 0.0, 0.0], information)
+    solved.update()
+    solved.add_loop(0, 10, [13.0, 0.0, 0.0], information)
+    assert solved.update().iterations > 0 and gross in solved.rejected
+    np.testing.assert_allclose(solved.poses, before, atol=1e-3)
+
+    risam, _ = _chain("risam")
+    risam.add_loop(0, 10, [13.0, 0.0, 0.0], information)
+    assert not risam.update().decided_at_arrival  # riSAM's schedule has no strong-outlier rule
+
+
+@pytest.mark.parametrize(("count", "measured", "kept"), [(3, 10.5, True), (1, 11.0, False)])
+def test_the_predicted_last_stage_keeps_the_loops_the_solve_keeps(count, measured, kept):
+    """Loops strong after their first stage can still hold the map together (three agreeing loops
+    3.5 sigma off): the last stage predicted from the first keeps them, as the solve does."""
+    solver, information = _chain("egnc")
+    loops = [solver.add_loop(0, 10, [measured, 0.0, 0.0], information) for _ in range(count)]
+    predicted = []
+    predict = solver._first_stage
+    solver._first_stage = lambda *args: predicted.append(predict(*args)) or predicted[-1]  # type: ignore[method-assign]
+    report = solver.update()
+    first = predicted[0]
+    assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after the first stage
+    assert not report.decided_at_arrival
+    kernel = solver._kernel
+    each = information[None].repeat(count, 0)
+    settled = first.last_stage(each, lambda r: kernel.weight(r, np.ones_like(r)), first.residual_norms[loops])
+    assert bool(np.all(settled**2 < 6.25)) == kept
+    assert bool(np.isin(loops, solver.rejected).any()) != kept
 
 
 def test_egnc_schedule_takes_fewer_iterations_than_risam_on_the_same_updates():
@@ -279,6 +365,26 @@ def test_save_and_load_keep_every_number(tmp_path):
         OnlineSolver.load(tmp_path / "missing.npz")
 
 
+def test_a_loaded_solver_predicts_from_the_same_factorized_map(tmp_path):
+    solver, information = _chain("egnc")
+    solver.add_loop(0, 10, [10.05, 0.0, 0.0], information)
+    solver.update()
+    for k in range(10, 13):  # poses hung from the factorized map
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
+    solver.update()
+    solver.save(tmp_path / "s.npz")
+    loaded, _ = OnlineSolver.load(tmp_path / "s.npz")
+    predictions = []
+    for s in (solver, loaded):
+        predict = s._first_stage
+        s._first_stage = lambda *args, predict=predict: predictions.append(predict(*args)) or predictions[-1]  # type: ignore[method-assign]
+        s.add_loop(2, 13, [14.0, 0.0, 0.0], information)
+        assert s.update().decided_at_arrival
+    np.testing.assert_array_equal(predictions[0].residual_norms, predictions[1].residual_norms)
+    np.testing.assert_array_equal(predictions[0].map_covariance, predictions[1].map_covariance)
+    np.testing.assert_array_equal(loaded.poses, solver.poses)
+
+
 def test_inputs_are_checked():
     solver = OnlineSolver(2, "egnc")
     solver.add_prior(0, [0.0, 0.0, 0.0])
@@ -338,7 +444,9 @@ def test_local_updates_reach_the_whole_map_estimate_and_solve_less():
             if hops is not None and len(report.new_loops):
                 loop_updates.append((report.region_poses, report.whole_map, report.stages[0].active_edges))
 
-        outcomes[hops] = replay(graph, "egnc", online_options=OnlineOptions(region_hops=hops), on_step=on_step)
+        # Every loop update solved, so that the two runs differ only in where they solve.
+        options = OnlineOptions(region_hops=hops, decide_at_arrival=False)
+        outcomes[hops] = replay(graph, "egnc", online_options=options, on_step=on_step)
     local, whole = outcomes[8].solver, outcomes[None].solver
     # Loop updates start on a region of the 500 poses; on this small lattice most are then judged
     # on the whole map (a loop crossed the strong-outlier line, or the boundary pulled), and more
