@@ -2,7 +2,7 @@
 
     python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
-        [--regraduate reference|new] [--region-hops N] [--strong-at-arrival] [--no-decide-at-arrival]
+        [--regraduate reference|new] [--region-hops N] [--strong-at-arrival] [--decide-at-arrival]
         [--rel-cost-tol TOL] [--linear-solver auto]
         [--json results.jsonl]
 
@@ -55,7 +55,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         regraduate=args.regraduate,
         stage_iterations=args.stage_iterations or None,
         strong_at_arrival=args.strong_at_arrival,
-        decide_at_arrival=not args.no_decide_at_arrival,
+        decide_at_arrival=args.decide_at_arrival,
         region_hops=args.region_hops or None,
         **({} if args.rel_cost_tol is None else {"rel_cost_tol": args.rel_cost_tol}),
     )
@@ -142,11 +142,7 @@ def main() -> int:
     parser.add_argument("--region-hops", type=int, default=0, help="OnlineOptions.region_hops; 0: the whole map")
     parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
     parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
-    parser.add_argument(
-        "--no-decide-at-arrival",
-        action="store_true",
-        help="OnlineOptions(decide_at_arrival=False): every loop update solves",
-    )
+    parser.add_argument("--decide-at-arrival", action="store_true", help="OnlineOptions(decide_at_arrival=True)")
     parser.add_argument(
         "--rel-cost-tol", type=float, help="OnlineOptions.rel_cost_tol (default: its default): where an update stops"
     )

@@ -125,6 +125,7 @@ def replay(
         "method": method,
         # A resumed run keeps its checkpoint's options; one asked to solve otherwise is refused.
         "region_hops": (online_options or OnlineOptions()).region_hops,
+        "decide_at_arrival": (online_options or OnlineOptions()).decide_at_arrival,
     }
     solver: OnlineSolver | None = None
     done = 0
@@ -133,7 +134,8 @@ def replay(
         solver, meta = OnlineSolver.load(path)
         if {key: meta.get(key) for key in settings} != settings:
             raise EgncError(
-                f"{path}: the checkpoint belongs to another graph, method or region_hops; remove it or choose another"
+                f"{path}: the checkpoint belongs to another graph, method, region_hops or decide_at_arrival;"
+                " remove it or choose another"
             )
         done = int(meta["steps_done"])
     if solver is None:

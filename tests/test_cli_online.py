@@ -104,6 +104,8 @@ def test_online_replay_of_a_g2o_file_keeps_file_edge_order(tmp_path):
         (["--online", "--method", "gnc-gm"], "--online replays"),
         (["--checkpoint", "x.npz"], "add --online"),
         (["--region-hops", "4"], "add --online"),
+        (["--decide-at-arrival"], "--decide-at-arrival"),
+        (["--online", "--method", "risam", "--decide-at-arrival"], "--decide-at-arrival"),
         (["--online", "--init", "chordal"], "--init does not apply"),
     ],
 )
@@ -126,6 +128,16 @@ def test_region_hops_zero_solves_every_loop_update_on_the_whole_map(tmp_path):
     assert whole["online"]["iterations"] != local["online"]["iterations"]
 
 
+def test_decide_at_arrival_makes_the_same_decision_with_fewer_iterations(tmp_path):
+    reports = {flag: tmp_path / f"{bool(flag)}.json" for flag in ("", "--decide-at-arrival")}
+    for flag, report in reports.items():
+        run = egnc_solve(DATASETS / "grid2d_outliers.g2o", "--online", *filter(None, [flag]), "--report", report, "-q")
+        assert run.returncode == 0, run.stderr
+    solved, decided = (json.loads(report.read_text()) for report in reports.values())
+    assert decided["rejected_edges"] == solved["rejected_edges"]
+    assert decided["online"]["iterations"] < 0.8 * solved["online"]["iterations"]
+
+
 def _run_until(args: list[str | Path], kill_at_step: int) -> int:
     """Start `egnc-solve args`, SIGKILL it once its progress reports step `kill_at_step` or later; its exit code."""
     process = subprocess.Popen(
@@ -144,14 +156,16 @@ def _run_until(args: list[str | Path], kill_at_step: int) -> int:
     return process.wait(timeout=300)
 
 
-def test_a_killed_replay_resumes_to_the_uninterrupted_result(tmp_path):
+@pytest.mark.parametrize("extra", [[], ["--decide-at-arrival"]])
+def test_a_killed_replay_resumes_to_the_uninterrupted_result(tmp_path, extra):
     source = DATASETS / "grid2d_outliers.g2o"
     whole_out, whole_report = tmp_path / "whole.g2o", tmp_path / "whole.json"
-    run = egnc_solve(source, "--online", "-o", whole_out, "--report", whole_report, "-q")
+    run = egnc_solve(source, "--online", *extra, "-o", whole_out, "--report", whole_report, "-q")
     assert run.returncode == 0, run.stderr
 
     checkpoint, out, report = tmp_path / "run.ckpt", tmp_path / "out.g2o", tmp_path / "report.json"
-    args = [source, "--online", "-o", out, "--report", report, "--checkpoint", checkpoint, "--checkpoint-every", "20"]
+    args = [source, "--online", *extra, "-o", out, "--report", report, "--checkpoint", checkpoint]
+    args += ["--checkpoint-every", "20"]
     # Progress lines come every tenth of the 499 steps: kill after the 2nd, then (resumed) the 6th.
     assert _run_until(args, 98) == -9 and checkpoint.exists() and not out.exists()
     assert _run_until(args, 294) == -9 and not out.exists()

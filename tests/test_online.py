@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -97,7 +98,7 @@ def test_odometry_between_known_poses_is_solved_without_graduation():
 
 
 def _chain(
-    method: str, linear_solver: str = "auto", regraduate: str = "reference", decide_at_arrival: bool = True
+    method: str, linear_solver: str = "auto", regraduate: str = "reference", decide_at_arrival: bool = False
 ) -> tuple[OnlineSolver, np.ndarray]:
     """Eleven poses along x, 1 m apart; the x variance between pose 0 and 10 is 0.01 m^2 by odometry."""
     options = OnlineOptions(regraduate=regraduate, decide_at_arrival=decide_at_arrival)  # type: ignore[arg-type]
@@ -156,13 +157,13 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
     report = solver.update()
     np.testing.assert_allclose(report.mu_history[:, 0], RISAM_SEQUENCE, atol=1e-12)
 
-    solver, information = _chain("egnc", decide_at_arrival=False)
+    solver, information = _chain("egnc")
     gross = solver.add_loop(0, 10, [13.0, 0.0, 0.0], information)
     report = solver.update()
     assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after its first stage: skips mu*
     assert gross in solver.rejected
 
-    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=True, decide_at_arrival=False))
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(strong_at_arrival=True))
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(10):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1000.0, 1e4, 1e4]))
@@ -173,7 +174,7 @@ def test_schedules_graduate_new_loops_by_their_own_rule():
 
     # Stiff odometry (x variance 1e-4 m^2 from pose 0 to 10): the loop's residual hardly shrinks at
     # mu = 0, and r = 2.2 lies between c / sqrt(3) = 1.73 and the strong threshold sqrt(6.25) = 2.5.
-    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(decide_at_arrival=False))
+    solver = OnlineSolver(2, "egnc")
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(10):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1e5, 1e4, 1e4]))
@@ -230,7 +231,7 @@ def test_the_predicted_first_stage_is_the_solved_one(dim):
 
 
 def test_a_gross_loop_is_decided_at_arrival_without_a_solve():
-    solver, information = _chain("egnc")
+    solver, information = _chain("egnc", decide_at_arrival=True)
     solver.add_loop(0, 10, [10.05, 0.0, 0.0], information)
     assert not solver.update().decided_at_arrival  # a loop that fits is graduated
     before = solver.poses
@@ -247,7 +248,7 @@ def test_a_gross_loop_is_decided_at_arrival_without_a_solve():
     assert solved.update().iterations > 0 and gross in solved.rejected
     np.testing.assert_allclose(solved.poses, before, atol=1e-3)
 
-    risam, _ = _chain("risam")
+    risam, _ = _chain("risam", decide_at_arrival=True)
     risam.add_loop(0, 10, [13.0, 0.0, 0.0], information)
     assert not risam.update().decided_at_arrival  # riSAM's schedule has no strong-outlier rule
 
@@ -256,7 +257,7 @@ def test_a_gross_loop_is_decided_at_arrival_without_a_solve():
 def test_the_predicted_last_stage_keeps_the_loops_the_solve_keeps(count, measured, kept):
     """Loops strong after their first stage can still hold the map together (three agreeing loops
     3.5 sigma off): the last stage predicted from the first keeps them, as the solve does."""
-    solver, information = _chain("egnc")
+    solver, information = _chain("egnc", decide_at_arrival=True)
     loops = [solver.add_loop(0, 10, [measured, 0.0, 0.0], information) for _ in range(count)]
     predicted = []
     predict = solver._first_stage
@@ -331,21 +332,34 @@ def _prefix(graph: PoseGraph, num_poses: int) -> PoseGraph:
     )
 
 
-def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path):
+@pytest.mark.parametrize("decide_at_arrival", [False, True])
+def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path, decide_at_arrival):
     graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 150)
-    whole = replay(graph, "egnc")
+    options = OnlineOptions(decide_at_arrival=decide_at_arrival)
+    whole = replay(graph, "egnc", online_options=options)
     path = tmp_path / "state.npz"
-    first = replay(graph, "egnc", checkpoint=path, checkpoint_every=7, stop_after=60)
+    first = replay(graph, "egnc", checkpoint=path, checkpoint_every=7, stop_after=60, online_options=options)
     assert first.steps == 60 and path.exists()
-    resumed = replay(graph, "egnc", checkpoint=path, checkpoint_every=7)
+    decided: list[bool] = []
+    resumed = replay(
+        graph,
+        "egnc",
+        checkpoint=path,
+        checkpoint_every=7,
+        online_options=options,
+        on_step=lambda step, total, report: decided.append(report.decided_at_arrival),
+    )
     assert resumed.resumed_from == 60 and resumed.steps == whole.steps
+    assert any(decided) == decide_at_arrival  # updates decided at arrival after the resume
     np.testing.assert_allclose(resumed.result.graph.poses, whole.result.graph.poses, atol=1e-9, rtol=0)
     np.testing.assert_array_equal(resumed.result.inliers, whole.result.inliers)
     np.testing.assert_array_equal(resumed.update_iterations, whole.update_iterations)
     with pytest.raises(EgncError, match="another graph"):
         replay(graph, "risam", checkpoint=path)
     with pytest.raises(EgncError, match="region_hops"):
-        replay(graph, "egnc", checkpoint=path, online_options=OnlineOptions(region_hops=8))
+        replay(graph, "egnc", checkpoint=path, online_options=replace(options, region_hops=8))
+    with pytest.raises(EgncError, match="decide_at_arrival"):
+        replay(graph, "egnc", checkpoint=path, online_options=replace(options, decide_at_arrival=not decide_at_arrival))
 
 
 def test_save_and_load_keep_every_number(tmp_path):
@@ -366,7 +380,7 @@ def test_save_and_load_keep_every_number(tmp_path):
 
 
 def test_a_loaded_solver_predicts_from_the_same_factorized_map(tmp_path):
-    solver, information = _chain("egnc")
+    solver, information = _chain("egnc", decide_at_arrival=True)
     solver.add_loop(0, 10, [10.05, 0.0, 0.0], information)
     solver.update()
     for k in range(10, 13):  # poses hung from the factorized map
@@ -444,9 +458,7 @@ def test_local_updates_reach_the_whole_map_estimate_and_solve_less():
             if hops is not None and len(report.new_loops):
                 loop_updates.append((report.region_poses, report.whole_map, report.stages[0].active_edges))
 
-        # Every loop update solved, so that the two runs differ only in where they solve.
-        options = OnlineOptions(region_hops=hops, decide_at_arrival=False)
-        outcomes[hops] = replay(graph, "egnc", online_options=options, on_step=on_step)
+        outcomes[hops] = replay(graph, "egnc", online_options=OnlineOptions(region_hops=hops), on_step=on_step)
     local, whole = outcomes[8].solver, outcomes[None].solver
     # Loop updates start on a region of the 500 poses; on this small lattice most are then judged
     # on the whole map (a loop crossed the strong-outlier line, or the boundary pulled), and more

@@ -166,6 +166,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --online: solve each loop update first on the poses within N trusted edges of its new"
         " edges, falling back to the whole map when in doubt (default, or 0: always the whole map)",
     )
+    parser.add_argument(
+        "--decide-at-arrival",
+        action="store_true",
+        help="with --online and --method egnc: solve nothing for a loop update whose stages, predicted from the"
+        " map factorized after the last solve, would end where it starts (docs/online.md)",
+    )
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument(
         "--plot",
@@ -269,8 +275,9 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
         online = None
         if args.online:
-            hops = args.region_hops
-            online_options = None if hops is None else OnlineOptions(region_hops=hops or None)
+            online_options = OnlineOptions(
+                region_hops=args.region_hops or None, decide_at_arrival=args.decide_at_arrival
+            )
             outcome = replay(
                 graph,
                 args.method,
@@ -322,6 +329,8 @@ def _check_options(args: argparse.Namespace) -> None:
         raise EgncError("--checkpoint saves the state of an --online replay: add --online")
     if not args.online and args.region_hops is not None:
         raise EgncError("--region-hops sets how an --online update solves: add --online")
+    if args.decide_at_arrival and (not args.online or args.method != "egnc"):
+        raise EgncError("--decide-at-arrival sets how an --online update with --method egnc solves")
     if is_irl(args.input) and (args.skip_unknown or args.information != "strict"):
         raise EgncError("--skip-unknown and --information apply to g2o files, not to IRL logs")
 
