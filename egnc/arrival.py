@@ -1,4 +1,4 @@
-"""An update's first graduation stage, predicted from the map factorized after the last solve.
+"""An online update's graduation stages, predicted from the map factorized after the last solve.
 
 Between two online updates the map is converged. The loop closures an update brings start at
 `mu = 0`, quadratic, and the first stage takes one Gauss-Newton step of the whole map with them.
@@ -10,14 +10,19 @@ Kalman update of the map by the loops:
 
 `ConvergedMap` keeps a factorization of `H` from the end of the last whole-map solve, so the step
 costs solves with `K d` right-hand sides instead of a linearization, a factorization and CG of the
-grown system. `FirstStage` holds the result: every edge's whitened residual at the stepped poses
-(evaluated on the manifold, not linearly: a false loop the linear model says the map absorbs is
-often still far off after the real step), from which EGNC's strong-outlier rule reads which
-new loops the stage would find strong, and which older loops it would move across that line.
+grown system. `FirstStage` holds the result: every edge's whitened residual at the stepped poses,
+evaluated on the manifold, not linearly (on manhattanOlson3500 the linear model put false loops'
+residuals after the step a median 300 times below the solved stage's: the map cannot turn that
+far in one real step), from which EGNC's strong-outlier rule reads which new loops the stage
+would find strong.
 
-`A H^-1 A^T` is also what the map's pull on the loops costs: loops of IRLS weights `w` lower the
-cost by at most `0.5 v^T A H^-1 A^T v`, `v = w Omega e`, in one step (the step's decrease without
-the loops' own curvature).
+Two more questions need only `C = A H^-1 A^T` (`FirstStage.map_covariance`):
+- where the last stage, at `mu = 1` from the bent map, leaves the new loops when the rest of the
+  map's loops hold their weights: IRLS of the new loops alone, whose weights `w` pull the map to
+  where they keep the residual `e(w) = W^-1 (W^-1 + C)^-1 e`, `W = blockdiag(w_k Omega_k)`
+  (`FirstStage.last_stage`);
+- what the new loops' pull costs: loops of IRLS weights `w` lower the cost by at most
+  `0.5 v^T C v`, `v = w Omega e`, in one step (its decrease without the loops' own curvature).
 
 Poses added after the map was factorized hang off it by odometry alone: the online solver places
 a new pose by composing its odometry, so that edge has zero residual and its linearization
