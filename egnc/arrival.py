@@ -117,6 +117,9 @@ class FirstStage:
 class ConvergedMap:
     """The factorization of the map's information `H` as it stood after a whole-map solve.
 
+    It stays valid while no solve of the same problem factorizes its trusted set again: the
+    online solver builds a new problem whenever the graph grows, before its next solve.
+
     Attributes:
         factorization: `x -> H^-1 x` over the unknowns of `pattern`.
         pattern: the map's normal-equations pattern then (its `free_index` and `size`).

@@ -573,9 +573,10 @@ class OnlineSolver:
     def _decided_at_arrival(self, new_loops: np.ndarray, first: FirstStage) -> bool:
         """Whether the update would end where it starts, with its new loops off: the predicted
         first stage finds every new loop strong (EGNC then weighs them at `mu = 1` from the stage's
-        bent map), the bent map costs no less at `mu = 1` than the map before it (so the last
-        stage would not descend from lower ground than the start), and the new loops' pull there
-        would lower the cost by less than the last stage's tolerance."""
+        bent map), the bent map costs no less at `mu = 1` than the map before it (the last stage
+        would not descend from lower ground than the start), the new loops' IRLS from there with
+        the rest of the map held lets them go (`FirstStage.last_stage`), and their pull on the map
+        as it stands would lower the cost by less than the last stage's tolerance."""
         far = exceeds(first.residual_norms, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
         if not far[new_loops].all():
             return False
@@ -590,7 +591,7 @@ class OnlineSolver:
         if not exceeds(settled, self.online_options.high_quantile, self._d, self.gnc_options.threshold).all():
             return False
         weights = loss.subset(new_loops).weight(self._r[new_loops])
-        bound = first.largest_decrease(weights, self._information[new_loops])
+        bound = first.largest_decrease(weights, information)
         return bound <= self._stage_options()[0].rel_cost_tol * cost
 
     def _prefix_problem(self, num_poses: int, num_edges: int) -> Problem:

@@ -355,8 +355,9 @@ class StepSolver:
         """The factorization of `H_T`, the sum of exactly the `trusted` `(E,)` edges' `products`
         (`(E, 2d, 2d + 1)`, `egnc.normal_equations.edge_products`), undamped, over this system's unknowns.
 
-        It reuses the analysis `set_system(trusted=...)` made for the same set. None when those
-        edges leave a pose unconstrained or `H_T` is not positive definite.
+        It reuses the analysis `set_system(trusted=...)` made for the same set, and is valid until
+        a step of this solver factorizes that set again (a backend factorizes in place). None when
+        those edges leave a pose unconstrained or `H_T` is not positive definite.
         """
         system = self._given_system(trusted)
         if system is None:
