@@ -196,14 +196,16 @@ def _first_stage_residual(solver: OnlineSolver, loop: int) -> float:
     return float(report.residual_history[0, 0])
 
 
+@pytest.mark.parametrize("linear_solver", ["scipy", "auto"])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_the_predicted_first_stage_is_the_solved_one(dim):
+def test_the_predicted_first_stage_is_the_solved_one(dim, linear_solver):
     """A loop to a pose added after the last solve (hung from the map by its odometry): the first
     stage predicted from the map factorized at the end of that solve equals the solved stage."""
     odometry, information = _square(dim)
     runs = {}
     for decide in (True, False):
-        solver = OnlineSolver(dim, "egnc", online_options=OnlineOptions(decide_at_arrival=decide))
+        options = OnlineOptions(decide_at_arrival=decide)
+        solver = OnlineSolver(dim, "egnc", linear_solver=linear_solver, online_options=options)
         solver.add_prior(0, from_matrices(dim, np.eye(dim + 1)))
         for k in range(3):
             solver.add_odometry(k, k + 1, odometry[k], information)
