@@ -1,7 +1,7 @@
 """SIGKILL an online replay at random moments, resume it from its checkpoint, compare with an uninterrupted run.
 
     python benchmarks/kill_resume.py [--file datasets/grid2d_outliers.g2o] [--kills 20] [--seed 0]
-        [--checkpoint-every 5] [--method egnc]
+        [--checkpoint-every 5] [--method egnc] [--decide-at-arrival]
 
 One uninterrupted `egnc-solve FILE --online` run gives the reference poses and rejected edges.
 Then one replay with `--checkpoint` is killed with SIGKILL at `--kills` moments drawn uniformly
@@ -37,7 +37,9 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--checkpoint-every", type=int, default=5)
     parser.add_argument("--method", default="egnc")
+    parser.add_argument("--decide-at-arrival", action="store_true", help="egnc-solve --decide-at-arrival")
     args = parser.parse_args()
+    options = ["--online", "--method", args.method, *(["--decide-at-arrival"] if args.decide_at_arrival else [])]
     from egnc.io import read_g2o
 
     rng = random.Random(args.seed)
@@ -45,13 +47,13 @@ def main() -> int:
     whole_out, whole_report = work / "whole.g2o", work / "whole.json"
     started = time.perf_counter()
     subprocess.run(
-        egnc_solve(args.file, "--online", "--method", args.method, "-o", whole_out, "--report", whole_report, "-q"),
+        egnc_solve(args.file, *options, "-o", whole_out, "--report", whole_report, "-q"),
         check=True,
     )
     whole_s = time.perf_counter() - started
     checkpoint, out, report = work / "run.ckpt", work / "out.g2o", work / "report.json"
     command = egnc_solve(
-        args.file, "--online", "--method", args.method, "-o", out, "--report", report, "-q",
+        args.file, *options, "-o", out, "--report", report, "-q",
         "--checkpoint", checkpoint, "--checkpoint-every", args.checkpoint_every,
     )  # fmt: skip
     print(f"reference run: {whole_s:.1f} s; {args.kills} kills drawn in (0, {whole_s:.1f}) s after each start")
