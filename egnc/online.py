@@ -529,13 +529,15 @@ class OnlineSolver:
 
     def _graph(self, num_poses: int | None = None, num_edges: int | None = None) -> PoseGraph:
         """The current graph in insertion (row) order, poses at the current estimate; or the
-        graph of its first `num_poses` poses and `num_edges` edges."""
+        graph of its first `num_poses` poses and `num_edges` edges. Its vertex ids are the rows:
+        poses may arrive in any id order, and a `PoseGraph` keeps its ids sorted."""
         poses, edges = slice(num_poses), slice(num_edges)
-        fixed = np.zeros(len(self._vertex_ids[poses]), dtype=bool)
+        rows = np.arange(len(self._vertex_ids))[poses]
+        fixed = np.zeros(len(rows), dtype=bool)
         fixed[self._gauge] = self._gauge != 0  # the solver fixes row 0 itself
         return PoseGraph(
             dim=self.dim,
-            vertex_ids=self._vertex_ids[poses],
+            vertex_ids=rows,
             poses=from_matrices(self.dim, self._T[poses]),
             edges=self._edges[edges],
             measurements=self._measurements[edges],

@@ -401,6 +401,22 @@ def test_a_loaded_solver_predicts_from_the_same_factorized_map(tmp_path):
     np.testing.assert_array_equal(loaded.poses, solver.poses)
 
 
+def test_poses_may_arrive_in_any_id_order():
+    """A front-end's ids need not grow (several robots, re-used numbering): nothing assumes it."""
+    information = np.diag([100.0, 100.0, 400.0])
+    solver = OnlineSolver(2, "egnc")
+    solver.add_prior(10, [0.0, 0.0, 0.0])
+    solver.add_odometry(10, 5, [1.0, 0.0, 0.0], information)
+    solver.add_odometry(5, 7, [1.0, 0.0, 0.0], information)
+    solver.add_loop(10, 7, [2.1, 0.0, 0.0], information)
+    report = solver.update()
+    assert report.iterations > 0 and solver.vertex_ids.tolist() == [10, 5, 7]
+    assert 2.0 < solver.poses[2, 0] < 2.1  # pose 7, pulled towards the loop
+    result = solver.result()
+    assert result.graph.vertex_ids.tolist() == [5, 7, 10] and result.inliers.all()
+    np.testing.assert_allclose(result.graph.poses[:, 0], [2.1 / 2.0, 2.1, 0.0], atol=0.05)
+
+
 def test_inputs_are_checked():
     solver = OnlineSolver(2, "egnc")
     solver.add_prior(0, [0.0, 0.0, 0.0])
