@@ -414,7 +414,8 @@ class OnlineSolver:
         new_r = added.whitened_norms(added.residuals(self._T))
         self._r = np.concatenate((self._r[:num_old_edges], new_r))
         moving = new_edges[new_r > _RESIDUAL_AT_REST]
-        needs_solve = prior_moved or len(new_loops) > 0 or len(moving) > 0
+        # Without edges there is nothing to solve (a prior has moved the map onto itself already).
+        needs_solve = len(self._edges) > 0 and (prior_moved or len(new_loops) > 0 or len(moving) > 0)
         graduating = np.zeros(len(self._edges), dtype=bool)
         outcome = _Graduation((), np.zeros((0, len(new_loops))), np.zeros((0, len(new_loops))), -1)
         # New loops alone have moved nothing yet: the map factorized after the last solve holds.
@@ -502,7 +503,8 @@ class OnlineSolver:
             raise GraphError(f"poses {unplaced} have no value and no odometry from a placed pose")
         self._T_initial = np.concatenate((self._T_initial, self._T[start:]))
         self._edges = np.concatenate((self._edges, rows))
-        self._measurements = np.concatenate((self._measurements, np.array(pending.measurements).reshape(len(rows), -1)))
+        measurements = np.array(pending.measurements).reshape(len(rows), POSE_SIZE[self.dim])
+        self._measurements = np.concatenate((self._measurements, measurements))
         self._Z_inv = np.concatenate((self._Z_inv, self._group.inverse(Z)))
         self._information = np.concatenate(
             (self._information, np.array(pending.information).reshape(len(rows), self._d, self._d))
@@ -557,7 +559,9 @@ class OnlineSolver:
         """The update's first stage predicted from the map factorized after the last whole-map
         solve (`egnc.arrival`), or, when there is none, from the map as it was before this update
         (its first `num_old_poses` poses and `num_old_edges` edges); None where not predicted."""
-        if not len(new_loops) or not num_old_poses or not self._predicts_first_stage():
+        if not len(new_loops) or not self._predicts_first_stage():
+            return None
+        if self._converged is None and not num_old_edges:  # no map to predict from yet
             return None
         if self._converged is None:
             old = np.arange(num_old_edges)

@@ -417,6 +417,19 @@ def test_poses_may_arrive_in_any_id_order():
     np.testing.assert_allclose(result.graph.poses[:, 0], [2.1 / 2.0, 2.1, 0.0], atol=0.05)
 
 
+@pytest.mark.parametrize("decide_at_arrival", [False, True])
+def test_an_update_may_bring_poses_without_edges(decide_at_arrival):
+    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(decide_at_arrival=decide_at_arrival))
+    solver.add_prior(3, [0.0, 0.0, 0.0])
+    solver.add_pose(4, [1.0, 0.0, 0.0])
+    report = solver.update()  # nothing joins them yet: nothing to solve
+    assert report.stages == () and solver.num_edges == 0
+    np.testing.assert_array_equal(solver.poses[:, 0], [0.0, 1.0])
+    loop = solver.add_loop(3, 4, [1.2, 0.0, 0.0], np.diag([100.0, 100.0, 400.0]))
+    solver.update()  # the only edge: pose 4 moves onto it
+    assert loop not in solver.rejected and solver.poses[1, 0] == pytest.approx(1.2, abs=1e-6)
+
+
 def test_inputs_are_checked():
     solver = OnlineSolver(2, "egnc")
     solver.add_prior(0, [0.0, 0.0, 0.0])
