@@ -54,8 +54,9 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
     options = OnlineOptions(
         regraduate=args.regraduate,
         stage_iterations=args.stage_iterations or None,
-        strong_at_arrival=args.strong_at_arrival,
-        decide_at_arrival=args.decide_at_arrival,
+        # Rules of the egnc schedule: the risam rows run without them.
+        strong_at_arrival=args.strong_at_arrival and method == "egnc",
+        decide_at_arrival=args.decide_at_arrival and method == "egnc",
         region_hops=args.region_hops or None,
         **({} if args.rel_cost_tol is None else {"rel_cost_tol": args.rel_cost_tol}),
     )

@@ -260,6 +260,10 @@ class OnlineSolver:
             (`warm_start`, `every_stage` and `max_stages` do not apply: online stages are always
             warm-started).
         online_options: the update protocol (`OnlineOptions`).
+
+    Raises:
+        EgncError: an unknown `dim` or method, or an option of the `egnc` schedule
+            (`strong_at_arrival`, `decide_at_arrival`) asked of the `risam` one.
     """
 
     def __init__(
@@ -276,6 +280,10 @@ class OnlineSolver:
             raise EgncError(f"dim must be 2 or 3, got {dim}")
         if method not in ONLINE_METHODS:
             raise EgncError(f"unknown online method {method!r}: choose one of {', '.join(ONLINE_METHODS)}")
+        rules = ("strong_at_arrival", "decide_at_arrival")
+        egnc_only = [name for name in rules if getattr(online_options, name, False)]
+        if method != "egnc" and egnc_only:
+            raise EgncError(f"OnlineOptions.{egnc_only[0]} applies to the egnc schedule (EGNC's strong-outlier rule)")
         self.dim, self.method = dim, method
         self.linear_solver = resolve_name(linear_solver)
         self.options = options or SolverOptions()

@@ -250,9 +250,9 @@ def test_a_gross_loop_is_decided_at_arrival_without_a_solve():
     assert solved.update().iterations > 0 and gross in solved.rejected
     np.testing.assert_allclose(solved.poses, before, atol=1e-3)
 
-    risam, _ = _chain("risam", decide_at_arrival=True)
-    risam.add_loop(0, 10, [13.0, 0.0, 0.0], information)
-    assert not risam.update().decided_at_arrival  # riSAM's schedule has no strong-outlier rule
+    for option in ("decide_at_arrival", "strong_at_arrival"):  # riSAM's schedule has no strong-outlier rule
+        with pytest.raises(EgncError, match=f"{option} applies to the egnc schedule"):
+            OnlineSolver(2, "risam", online_options=OnlineOptions(**{option: True}))
 
 
 @pytest.mark.parametrize(("count", "measured", "kept"), [(3, 10.5, True), (1, 11.0, False)])
