@@ -215,7 +215,7 @@ def test_the_predicted_first_stage_is_the_solved_one(dim, linear_solver):
             solver.add_odometry(k, k + 1, odometry[k % 4], information)
         solver.update()
         T = to_matrices(dim, solver.poses)
-        wrong = np.linalg.inv(T[2]) @ T[6] @ group_of(dim).exp(np.full((1, len(information)), 0.05))[0]  # r^2 = 5
+        wrong = np.linalg.inv(T[2]) @ T[6] @ group_of(dim).exp(np.full((1, len(information)), 0.05))[0]
         loop = solver.add_loop(2, 6, from_matrices(dim, wrong[None])[0], information)
         runs[decide] = (solver, loop)
     solver, loop = runs[True]
