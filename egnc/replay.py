@@ -132,7 +132,9 @@ def replay(
     path = None if checkpoint is None else Path(checkpoint)
     if path is not None and path.exists():
         solver, meta = OnlineSolver.load(path)
-        if {key: meta.get(key) for key in settings} != settings:
+        # Checkpoints written before decide_at_arrival existed solved every update.
+        saved = {key: meta.get(key, False if key == "decide_at_arrival" else None) for key in settings}
+        if saved != settings:
             raise EgncError(
                 f"{path}: the checkpoint belongs to another graph, method, region_hops or decide_at_arrival;"
                 " remove it or choose another"

@@ -364,6 +364,18 @@ def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path, decide_at
         replay(graph, "egnc", checkpoint=path, online_options=replace(options, decide_at_arrival=not decide_at_arrival))
 
 
+def test_a_checkpoint_from_before_decide_at_arrival_resumes(tmp_path):
+    graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 60)
+    path = tmp_path / "old.npz"
+    first = replay(graph, "egnc", checkpoint=path, stop_after=30)
+    solver, meta = OnlineSolver.load(path)
+    del meta["decide_at_arrival"]  # as written before the option existed
+    solver.save(path, meta=meta)
+    resumed = replay(graph, "egnc", checkpoint=path)
+    assert first.steps == 30 and resumed.resumed_from == 30
+    np.testing.assert_array_equal(resumed.result.inliers, replay(graph, "egnc").result.inliers)
+
+
 def test_save_and_load_keep_every_number(tmp_path):
     solver, information = _chain("risam")
     solver.add_loop(0, 10, [10.3, 0.0, 0.0], information)
