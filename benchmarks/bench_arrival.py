@@ -7,7 +7,7 @@ Each case (riSAM-protocol false loops, `egnc.datasets.add_false_loops`) is repla
 schedule and *every* update solved, as by default; at each loop update the solver also predicts
 it as `OnlineOptions(decide_at_arrival=True)` would (a subclass overrides the private method that
 answers, and answers "solve"), so that the prediction is compared with the solve on the same
-states. Poses and edges are fed as `egnc.replay` feeds them.
+states. Poses and edges are fed as `egnc.replay` feeds them (`add_gauge`, `add_step`).
 
 Columns:
 - `predicted loops`: new loops of the updates whose first stage was predicted (the others lack
@@ -45,7 +45,7 @@ def run(graph, known) -> str:
     """Replay one corrupted graph; its row's cells after the first three."""
     from egnc.losses import KernelLoss
     from egnc.online import OnlineOptions, OnlineSolver
-    from egnc.replay import replay_steps
+    from egnc.replay import add_gauge, add_step, replay_steps
 
     watch: dict = {}
 
@@ -64,15 +64,9 @@ def run(graph, known) -> str:
 
     ratios, outcomes = [], []
     solver = Watched(graph.dim, "egnc", online_options=OnlineOptions(decide_at_arrival=True))
-    gauge = int(np.flatnonzero(graph.fixed)[0]) if graph.fixed.any() else 0
-    solver.add_prior(int(graph.vertex_ids[gauge]), graph.poses[gauge])
-    ids, Z, information = graph.vertex_ids[graph.edges], graph.measurements, graph.information
-    for edges in replay_steps(graph, known):  # as egnc.replay feeds them
-        odometry, loops = edges[known[edges]], edges[~known[edges]]
-        if len(odometry):
-            solver.add_odometry_batch(ids[odometry], Z[odometry], information[odometry])
-        if len(loops):
-            solver.add_loops(ids[loops], Z[loops], information[loops])
+    add_gauge(solver, graph)
+    for edges in replay_steps(graph, known):
+        add_step(solver, graph, edges, known)
         report = solver.update()
         predicted, decided = watch.pop("first", None), watch.pop("decided", None)
         if predicted is None or not len(report.new_loops):

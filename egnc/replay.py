@@ -33,7 +33,7 @@ from egnc.graph import PoseGraph
 from egnc.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
 
-__all__ = ["ReplayOutcome", "latency_summary", "replay", "replay_steps"]
+__all__ = ["ReplayOutcome", "add_gauge", "add_step", "latency_summary", "replay", "replay_steps"]
 
 StepCallback = Callable[[int, int, UpdateReport], None]
 """Receives `(step, total_steps, report)` after every update (progress display)."""
@@ -68,6 +68,21 @@ def replay_steps(graph: PoseGraph, known_inliers: np.ndarray) -> list[np.ndarray
     order = np.lexsort((np.arange(graph.num_edges), ~known_inliers, later))
     boundaries = np.flatnonzero(np.diff(later[order])) + 1
     return np.split(order, boundaries)
+
+
+def add_gauge(solver: OnlineSolver, graph: PoseGraph) -> None:
+    """Give `solver` the prior of `graph`'s gauge pose (the fixed one, else row 0), as `replay` does."""
+    gauge = int(np.flatnonzero(graph.fixed)[0]) if graph.fixed.any() else 0
+    solver.add_prior(int(graph.vertex_ids[gauge]), graph.poses[gauge])
+
+
+def add_step(solver: OnlineSolver, graph: PoseGraph, edges: np.ndarray, known_inliers: np.ndarray) -> None:
+    """Add one step's `edges` `(K,)` of `graph` to `solver` as `replay` does: the known inliers
+    (`(E,)` bool) as odometry first, then the others as loop closures, in file order."""
+    odometry, loops = edges[known_inliers[edges]], edges[~known_inliers[edges]]
+    for batch, add in ((odometry, solver.add_odometry_batch), (loops, solver.add_loops)):
+        if len(batch):
+            add(graph.vertex_ids[graph.edges[batch]], graph.measurements[batch], graph.information[batch])
 
 
 def fingerprint(graph: PoseGraph, known_inliers: np.ndarray) -> str:
@@ -149,19 +164,12 @@ def replay(
             gnc_options=gnc_options,
             online_options=online_options,
         )
-        gauge = int(np.flatnonzero(graph.fixed)[0]) if graph.fixed.any() else 0
-        solver.add_prior(int(graph.vertex_ids[gauge]), graph.poses[gauge])
+        add_gauge(solver, graph)
     resumed_from = done
-    ids, Z, info = graph.vertex_ids[graph.edges], graph.measurements, graph.information
     order = np.concatenate(steps) if steps else np.zeros(0, dtype=np.int64)
     last = len(steps) if stop_after is None else min(len(steps), stop_after)
     for step in range(done, last):
-        edges = steps[step]
-        odometry, loops = edges[known[edges]], edges[~known[edges]]
-        if len(odometry):
-            solver.add_odometry_batch(ids[odometry], Z[odometry], info[odometry])
-        if len(loops):
-            solver.add_loops(ids[loops], Z[loops], info[loops])
+        add_step(solver, graph, steps[step], known)
         report = solver.update()
         done = step + 1
         if on_step is not None:
