@@ -15,11 +15,12 @@ So the decision is made on least-squares maps instead, in rounds:
    predicts their measurements, within the combined uncertainty of both (the residual alone,
    `r^2`, ignores how uncertain the relative pose of two far-apart poses is). If the map agrees
    with *all* rejected loops, conditioned one on another, at `chi2.ppf(q_readmit, d)`, all
-   come back: nothing in the graph contradicts anything else (MIT, smallGrid3D). Otherwise only
-   loops whose relative pose the map determines at least as well as they measure it are
-   re-admitted, each given those before it: where the map is weaker, agreement within its
-   uncertainty says little, and the noisy Manhattan graphs absorbed gross outliers that way
-   (recall 0.89, ATE 8.8 m on manhattan_noisy.irl before this gate).
+   come back: nothing in the graph contradicts anything else (MIT, smallGrid3D). Otherwise
+   loops are re-admitted one at a time, each given those before it, with the map credited with
+   no more uncertainty of a loop's relative pose than the loop's own (`credited_covariance`):
+   where the map is much weaker than the loop, agreement within its uncertainty says little,
+   and the noisy Manhattan graphs absorbed gross outliers that way (recall 0.89, ATE 8.8 m on
+   manhattan_noisy.irl when the full map covariance was credited).
 4. Repeat until the classification holds (or `MAX_ROUNDS`, or a round that reaches the
    iteration limit).
 
@@ -91,10 +92,10 @@ def readmitted(
 
     Two cases (module docstring). If the map agrees with *every* rejected loop, taken together,
     all come back: nothing in the graph contradicts anything else (a clean graph whose loops the
-    robust kernel let go). Otherwise only loops whose relative pose the map already determines at
-    least as precisely as the loop measures it are re-admitted, one at a time, each given those
-    before it: where the map is weaker than the loop, agreement within the map's uncertainty says
-    little (a weakly constrained graph absorbs gross outliers), and the robust verdict stands.
+    robust kernel let go). Otherwise loops are re-admitted one at a time, each given those before
+    it, by the statistic of `credited_covariance`: the map's uncertainty of a loop's relative
+    pose counts only up to the loop's own, since agreement within a much weaker map's
+    uncertainty says little (a weakly constrained graph absorbs gross outliers).
 
     Args:
         problem: least squares of the accepted edges, solved at `poses` `(N, n, n)`.
@@ -122,11 +123,9 @@ def readmitted(
         for start in range(0, len(candidates), READMIT_BATCH):
             batch = candidates[start : start + READMIT_BATCH]
             if np.all(floor[start : start + READMIT_BATCH] > threshold):
-                break  # none passes alone, or is well determined, so none passes: no solve needed
-            e, S, well_determined = _batch_innovations(problem, poses, factors, batch, covariance_solve)
-            rows = (np.flatnonzero(well_determined)[:, None] * e.shape[1] + np.arange(e.shape[1])).ravel()
-            ok = np.zeros(len(batch), dtype=bool)
-            ok[well_determined] = sequentially_consistent(e[well_determined], S[np.ix_(rows, rows)], threshold)
+                break  # none passes alone, so none passes: no solve needed
+            e, S, own = _batch_innovations(problem, poses, factors, batch, covariance_solve)
+            ok = sequentially_consistent(e, credited_covariance(S, own), threshold)
             if not ok.any():
                 break
             passed[np.sort(batch)[ok]] = True
@@ -162,14 +161,14 @@ def _all_agree(
 
 
 def _statistic_floor(loops: BetweenFactors, poses: np.ndarray) -> np.ndarray:
-    """`(K,)` lower bounds of the innovation statistics of `loops`, for those that are well determined.
+    """`(K,)` lower bounds of the credited innovation statistics of `loops` (`credited_covariance`).
 
-    Well determined means `trace(Sigma_rel) <= trace(Omega^-1)` (`_batch_innovations`), so
-    `lambda_max(Omega^-1 + Sigma_rel) <= lambda_max(Omega^-1) + trace(Omega^-1)` and
-    `e^T (Omega^-1 + Sigma_rel)^-1 e >= |e|^2 / (lambda_max(Omega^-1) + trace(Omega^-1))`.
-    A loop above the threshold by this bound fails alone or is not well determined; a batch of
-    only such loops admits none (the first loop `sequentially_consistent` visits is tested
-    alone, and so is every later one while none is admitted).
+    The credited map covariance `s Sigma_rel` has `trace(s Sigma_rel) <= trace(Omega^-1)`, so
+    `lambda_max(Omega^-1 + s Sigma_rel) <= lambda_max(Omega^-1) + trace(Omega^-1)` and
+    `e^T (Omega^-1 + s Sigma_rel)^-1 e >= |e|^2 / (lambda_max(Omega^-1) + trace(Omega^-1))`.
+    A loop above the threshold by this bound fails alone; a batch of only such loops admits
+    none (the first loop `sequentially_consistent` visits is tested alone, and so is every later
+    one while none is admitted).
     """
     e = loops.residuals(poses)
     own = np.linalg.inv(loops.information)
@@ -184,31 +183,45 @@ def _batch_innovations(
     batch: np.ndarray,
     covariance_solve: Factorization,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Innovations `(K, d)`, covariance `(K d, K d)` and `(K,)` "well determined" flags of edges `batch`, in edge order.
-
-    A loop's relative pose is well determined when the map's covariance of it is no larger than
-    the loop's own in total variance, `trace(Sigma_rel) <= trace(Omega^-1)` (metres^2 and
-    radians^2 added, as in the tangent). The scale-free `lambda_max(Omega^(1/2) Sigma_rel
-    Omega^(1/2)) <= 1` was measured too strict: CSAIL's true corridor loop measures its rotation
-    far better than the map knows it (lambda_max 329) while the map fixes the rest (trace ratio
-    0.16); the gross outliers the noisy Manhattan graphs absorb have trace ratios 1.2 to 7.
-    """
+    """Innovations `(K, d)`, their covariance `(K d, K d)` and the loops' own covariances `(K, d, d)`, in edge order."""
     loops = factors.subset(np.sort(batch))
     e, S = innovations(problem, poses, loops, covariance_solve)
-    d = e.shape[1]
-    block = np.arange(len(e))[:, None] * d + np.arange(d)
-    relative = S[block[:, :, None], block[:, None, :]] - np.linalg.inv(loops.information)
-    return e, S, well_determined(relative, loops.information)
+    return e, S, np.linalg.inv(loops.information)
 
 
-def well_determined(relative: np.ndarray, information: np.ndarray) -> np.ndarray:
-    """`(K,)` bool: the map's covariance `(K, d, d)` of each loop's relative pose is no larger than the loop's own.
+def credited_covariance(S: np.ndarray, own: np.ndarray) -> np.ndarray:
+    """`(K d, K d)` innovation covariance with each loop's share of the map's covariance capped at its own size.
 
-    In total variance, `trace(Sigma_rel) <= trace(Omega^-1)` (`_batch_innovations` says why),
-    for loops of information `(K, d, d)`.
+    `S = blockdiag(own) + M`, with `M` the map's joint covariance of the `K` loops' relative
+    poses and `own` `(K, d, d)` the loops' measurement covariances. Each loop's rows and columns
+    of `M` are scaled by the square root of its `map_credit`, so that its block is credited with
+    no more total variance than the loop's own (a loop the map determines at least as well as it
+    measures it keeps its block unchanged). The result is positive definite.
     """
-    own = np.trace(np.linalg.inv(information), axis1=1, axis2=2)
-    return np.trace(relative, axis1=1, axis2=2) <= own
+    num_loops, d = own.shape[:2]
+    block = np.arange(num_loops)[:, None] * d + np.arange(d)
+    own_full = np.zeros_like(S)
+    own_full[block[:, :, None], block[:, None, :]] = own
+    relative = S - own_full
+    root = np.repeat(np.sqrt(map_credit(relative[block[:, :, None], block[:, None, :]], own)), d)
+    return own_full + root[:, None] * relative * root[None, :]
+
+
+def map_credit(relative: np.ndarray, own: np.ndarray) -> np.ndarray:
+    """`(K,)` share of the map's covariance of each loop's relative pose that re-admission credits.
+
+    1 where the map determines the relative pose at least as well as the loop measures it, in
+    total variance (`trace(relative) <= trace(own)`, metres^2 and radians^2 added, as in the
+    tangent: the loop is well determined), else `trace(own) / trace(relative)`, which scales the
+    map's covariance down to the loop's own size.
+
+    Args:
+        relative: `(K, d, d)` the map's covariance of each loop's relative pose.
+        own: `(K, d, d)` each loop's measurement covariance `Omega^-1`.
+    """
+    own_trace = np.trace(own, axis1=1, axis2=2)
+    relative_trace = np.trace(relative, axis1=1, axis2=2)
+    return np.minimum(1.0, own_trace / np.maximum(relative_trace, np.finfo(float).tiny))
 
 
 def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> np.ndarray:

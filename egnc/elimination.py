@@ -51,7 +51,7 @@ import time
 
 import numpy as np
 
-from egnc.decision import Decision, StartContext, least_squares_report, well_determined
+from egnc.decision import Decision, StartContext, least_squares_report, map_credit
 from egnc.factors import BetweenFactors
 from egnc.gnc import GncOptions, StageReport
 from egnc.graph import PoseGraph
@@ -100,8 +100,10 @@ def undecided(
     """`(R,)` bool for the loops `decision` rejected (edge order): re-admission could neither take nor refute it.
 
     Such a loop agrees with the decision's map (innovation statistic at most
-    `chi2.ppf(readmit_quantile, d)`) only because the map does not determine its relative pose
-    (`egnc.decision.well_determined` is false): the map is too weak to judge it.
+    `chi2.ppf(readmit_quantile, d)`) only because the map does not determine its relative pose:
+    with the map credited no more uncertainty of it than the loop's own
+    (`egnc.decision.map_credit`), the statistic exceeds that threshold. The map is too weak to
+    judge it.
     """
     rejected = np.flatnonzero(robust & ~decision.inliers)
     if not len(rejected):
@@ -115,10 +117,14 @@ def undecided(
     except NotPositiveDefiniteError:  # no covariance at a degenerate solution: nothing to judge by
         return np.zeros(len(rejected), dtype=bool)
     e = loops.residuals(decision.poses)
-    S = relative + np.linalg.inv(loops.information)
-    statistics = np.einsum("ki,ki->k", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])
-    agree = statistics <= chi2_quantile(gnc_options.readmit_quantile, graph.tangent_dim)
-    return agree & ~well_determined(relative, loops.information)
+    own = np.linalg.inv(loops.information)
+    threshold = chi2_quantile(gnc_options.readmit_quantile, graph.tangent_dim)
+    credit = map_credit(relative, own)[:, None, None]
+    full, capped = (
+        np.einsum("ki,ki->k", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])
+        for S in (own + relative, own + credit * relative)
+    )
+    return (full <= threshold) & (capped > threshold)
 
 
 def elimination_decision(context: StartContext, to_beat: Decision) -> tuple[Decision | None, tuple[StageReport, ...]]:

@@ -23,9 +23,7 @@ from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
 from egnc.marginals import innovations, pose_covariances
 
-GUESS_ONLY = GncOptions(
-    chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
-)
+GUESS_ONLY = GncOptions(chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False)
 """The decision from the initial guess alone."""
 
 OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, chordal_start=False, elimination_start=False)
@@ -282,9 +280,9 @@ def test_covariances_solved_in_column_groups_equal_one_solve(monkeypatch):
 
 
 def test_the_bounds_that_spare_covariance_solves_hold():
-    # Readmission skips the covariance of a loop with r^2 below the threshold (its innovation
-    # statistic is at most r^2) and of a batch whose statistics all exceed a floor that holds
-    # for well-determined loops. Both bounds, on loops left out of a map, true and false.
+    # Readmission skips the covariance of a loop with r^2 below the threshold (its credited
+    # statistic is at most r^2) and of a batch whose credited statistics all exceed a floor.
+    # Both bounds, on loops left out of a map, true and false, weakly determined ones included.
     world = grid_world(2, 300, seed=11, noise_scale=0.5)
     clean = solve(world.graph, "l2")
     corrupted = add_false_loops(world.graph, 20, seed=12, reference_poses=clean.graph.poses)
@@ -298,12 +296,93 @@ def test_the_bounds_that_spare_covariance_solves_hold():
     d = 3
     blocks = np.arange(len(e))[:, None] * d + np.arange(d)
     S_kk = S[blocks[:, :, None], blocks[:, None, :]]
-    alone = np.einsum("ki,ki->k", e, np.linalg.solve(S_kk, e[:, :, None])[:, :, 0])
+    own = np.linalg.inv(loops.information)
+    credited = decision_module.credited_covariance(S, own)[blocks[:, :, None], blocks[:, None, :]]
+    alone = np.einsum("ki,ki->k", e, np.linalg.solve(credited, e[:, :, None])[:, :, 0])
     r = loops.whitened_norms(e)
     assert np.all(alone <= r * r * (1 + 1e-12))
-    own = np.linalg.inv(loops.information)
     well_determined = np.trace(S_kk - own, axis1=1, axis2=2) <= np.trace(own, axis1=1, axis2=2)
+    assert 10 < well_determined.sum() < len(e)  # both kinds
     floor = decision_module._statistic_floor(loops, poses)
-    assert well_determined.sum() > 10
-    assert np.all(floor[well_determined] <= alone[well_determined] * (1 + 1e-12))
+    assert np.all(floor <= alone * (1 + 1e-12))
     assert np.any(floor > chi2_quantile(0.9999, d))  # the floor does spare false loops
+
+
+def _chain_with_loops(scales: dict[tuple[int, int], float], errors: dict[tuple[int, int], float]):
+    """A 2D chain of 41 poses (1 m steps, odometry information 100) and loops `(i, j)` whose covariance
+    is the chain's covariance of their relative pose divided by `scales[(i, j)]`, measured off the
+    truth by a sideways error giving `r^2 = errors[(i, j)]`. Returns `(graph, factors, problem, poses)`,
+    the problem being the odometry's least squares (solved at the truth, the measurements being exact)."""
+    from egnc.graph import PoseGraph
+    from egnc.marginals import relative_covariances
+
+    num = 41
+    truth = np.stack([np.arange(num, dtype=float), np.zeros(num), np.zeros(num)], axis=1)
+    odometry = np.stack([np.arange(num - 1), np.arange(1, num)], axis=1)
+    loops = np.array(list(scales), dtype=np.int64)
+    edges = np.concatenate([odometry, loops])
+    measurements = np.zeros((len(edges), 3))
+    measurements[:, 0] = edges[:, 1] - edges[:, 0]
+    information = np.tile(100.0 * np.eye(3), (len(edges), 1, 1))
+    chain = np.arange(len(edges)) < num - 1
+    poses = to_matrices(2, truth)
+    for _ in range(4):  # a loop's Jacobian, so the map's covariance of its residual, depends on its measurement
+        graph = PoseGraph(2, np.arange(num), truth, edges, measurements, information)
+        factors = BetweenFactors.from_graph(graph)
+        problem = Problem.from_graph(graph.subgraph_edges(chain), "auto", factors.subset(chain))
+        relative = relative_covariances(problem, poses, factors.subset(~chain))
+        for k, pair in enumerate(scales):
+            information[num - 1 + k] = np.linalg.inv(relative[k] / scales[pair])
+            measurements[num - 1 + k, 1] = np.sqrt(errors[pair] / information[num - 1 + k, 1, 1])  # r^2 = y^2 Omega_yy
+    graph = PoseGraph(2, np.arange(num), truth, edges, measurements, information)
+    factors = BetweenFactors.from_graph(graph)
+    return graph, factors, Problem.from_graph(graph.subgraph_edges(chain), "auto", factors.subset(chain)), poses
+
+
+def test_readmission_credits_the_map_with_no_more_uncertainty_than_the_loops_own():
+    # (0, 20): the chain's covariance of its relative pose is twice the loop's own, r^2 = 30;
+    # (0, 40): twenty times, r^2 = 300 (a gross error that a weak map would absorb);
+    # (10, 30): a gross error the chain knows well, so that not every rejected loop agrees.
+    scales = {(0, 20): 2.0, (0, 40): 20.0, (10, 30): 0.25}
+    graph, factors, problem, poses = _chain_with_loops(scales, {(0, 20): 30.0, (0, 40): 300.0, (10, 30): 200.0})
+    loops = np.flatnonzero(graph.is_loop_closure)
+    r = factors.whitened_norms(factors.residuals(poses))
+    np.testing.assert_allclose(r[loops] ** 2, [30.0, 300.0, 200.0])
+    threshold = chi2_quantile(0.9999, 3)
+    e, S = innovations(problem, poses, factors.subset(loops), decision_module.covariance_solver(problem, poses))
+    own = np.linalg.inv(factors.information[loops])
+    block = np.arange(3)[:, None] * 3 + np.arange(3)
+    ratios = np.trace(S[block[:, :, None], block[:, None, :]] - own, axis1=1, axis2=2) / np.trace(own, axis1=1, axis2=2)
+    np.testing.assert_allclose(ratios, list(scales.values()), rtol=0.05)
+    credited = decision_module.credited_covariance(S, own)
+    alone = [
+        [e[k] @ np.linalg.solve(M[3 * k : 3 * k + 3, 3 * k : 3 * k + 3], e[k]) for k in range(3)] for M in (S, credited)
+    ]
+    # the uncredited statistic lets both weak-map loops pass; credited, only the first
+    assert alone[0][0] < threshold and alone[0][1] < threshold < alone[0][2]
+    assert alone[1][0] < threshold < alone[1][1]
+    np.testing.assert_allclose(alone[0][2], alone[1][2])  # a well-determined loop is tested as before
+    rejected = np.zeros(graph.num_edges, dtype=bool)
+    rejected[loops] = True
+    back = decision_module.readmitted(problem, poses, factors, rejected, r, 0.9999)
+    np.testing.assert_array_equal(np.flatnonzero(back), loops[:1])
+
+
+def test_credited_covariance_scales_the_map_share_of_weak_loops_to_their_own_size():
+    rng = np.random.default_rng(0)
+    own = np.stack([np.diag(rng.uniform(0.5, 2.0, 3)) for _ in range(3)])
+    root = rng.normal(size=(9, 9))
+    relative = root @ root.T  # the map's joint covariance: blocks of trace about 27 against own's 3-6
+    relative[:3, :] *= 0.05
+    relative[:, :3] *= 0.05  # the first loop well determined
+    block = np.arange(3)[:, None] * 3 + np.arange(3)
+    S = relative.copy()
+    S[block[:, :, None], block[:, None, :]] += own
+    credited = decision_module.credited_covariance(S, own)
+    np.linalg.cholesky(credited)  # positive definite
+    map_part = credited.copy()
+    map_part[block[:, :, None], block[:, None, :]] -= own
+    np.testing.assert_allclose(credited[:3, :3], S[:3, :3])
+    for k in (1, 2):
+        assert np.trace(relative[3 * k : 3 * k + 3, 3 * k : 3 * k + 3]) > np.trace(own[k])
+        np.testing.assert_allclose(np.trace(map_part[3 * k : 3 * k + 3, 3 * k : 3 * k + 3]), np.trace(own[k]))
