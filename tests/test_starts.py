@@ -46,17 +46,17 @@ def test_truncated_cost_caps_each_loop_at_the_threshold():
     assert truncated_cost(r, robust, 3, 0.99) == pytest.approx(0.5 * (1.0 + 4.0 + q + 100.0))
 
 
-def test_a_drifted_guess_no_longer_decides_the_result():
-    graph = drifted_guess(grid_world(2, 1000, seed=1).graph, seed=2, heading_sigma=0.5)
+def test_a_drifted_guess_no_longer_decides_the_result(dataset_path):
+    # manhattanOlson3500 re-chained with 0.1 rad of heading noise per step: from that guess the
+    # GNC stage settles in a folded map and the decision from it confirms the fold
+    graph = drifted_guess(egnc.read_g2o(dataset_path("manhattanOlson3500.g2o")), seed=2, heading_sigma=0.1)
     guess_only = solve(graph, gnc_options=GUESS_ONLY)
     result = solve(graph)
     least_squares = solve(graph, "l2", init="chordal")
     assert result.start == "chordal" and "chordal initialization" in result.message
-    assert len(result.rejected_edges) < len(guess_only.rejected_edges)
+    assert len(guess_only.rejected_edges) > 100 and len(result.rejected_edges) == 0
     assert result.truncated_cost < guess_only.truncated_cost
-    # what it rejects fails the outlier test at the least-squares optimum of every edge too
-    q = chi2_quantile(0.99, 3)
-    assert np.all(least_squares.residual_norms[result.rejected_edges] ** 2 > q)
+    assert result.cost == pytest.approx(least_squares.cost, rel=1e-6)  # the least-squares optimum
 
 
 def test_false_loops_keep_the_decision_of_the_guess():
