@@ -36,7 +36,9 @@ decision cannot bring them back (SE-Sync's manhattan, a clean file whose guess i
 chained over 3500 poses: 44 of 1954 loops rejected, truncated cost 1820). `all_edges_decision`
 is the start for that case: the chordal initialization of *every* edge, and the GNC stage run
 again from there (the same schedule as from the guess), then the decision. On that file it
-rejects 22 loops with truncated cost 1725 (GTSAM's GNC-TLS decision: 37 and 1685). It runs only:
+rejected 22 loops with truncated cost 1725 (GTSAM's GNC-TLS decision: 37 and 1685); since
+re-admission credits the map with up to a loop's own uncertainty, the guess's decision rejects 8
+there and wins. It runs only:
 
 1. where the best decision so far rejects a loop (otherwise nothing is left to win back);
 2. where it rejects at most `ALL_EDGES_SHARE` of the loop closures: the chordal system of every
