@@ -17,11 +17,12 @@ from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import MAX_ROUNDS, decide_outliers, sequentially_consistent, truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions
+from egnc.graph import PoseGraph
 from egnc.io import read_irl
 from egnc.kernels import chi2_quantile
 from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
-from egnc.marginals import innovations, pose_covariances
+from egnc.marginals import innovations, pose_covariances, relative_covariances
 
 GUESS_ONLY = GncOptions(chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False)
 """The decision from the initial guess alone."""
@@ -318,14 +319,13 @@ def test_the_bounds_that_spare_covariance_solves_hold():
     assert np.any(floor > chi2_quantile(0.9999, d))  # the floor does spare false loops
 
 
-def _chain_with_loops(scales: dict[tuple[int, int], float], errors: dict[tuple[int, int], float]):
+def _chain_with_loops(
+    scales: dict[tuple[int, int], float], errors: dict[tuple[int, int], float]
+) -> tuple[PoseGraph, BetweenFactors, Problem, np.ndarray]:
     """A 2D chain of 41 poses (1 m steps, odometry information 100) and loops `(i, j)` whose covariance
     is the chain's covariance of their relative pose divided by `scales[(i, j)]`, measured off the
     truth by a sideways error giving `r^2 = errors[(i, j)]`. Returns `(graph, factors, problem, poses)`,
     the problem being the odometry's least squares (solved at the truth, the measurements being exact)."""
-    from egnc.graph import PoseGraph
-    from egnc.marginals import relative_covariances
-
     num = 41
     truth = np.stack([np.arange(num, dtype=float), np.zeros(num), np.zeros(num)], axis=1)
     odometry = np.stack([np.arange(num - 1), np.arange(1, num)], axis=1)
