@@ -28,6 +28,7 @@ from egnc.gnc import (
     iteration_limited,
     known_inlier_mask,
     run_gnc,
+    stage_tolerance,
 )
 from egnc.graph import PoseGraph
 from egnc.health import check_representable
@@ -341,7 +342,7 @@ def solve(
     refine = method in GRADUATED_METHODS and gnc_options.refine
     stage_options = options
     if refine:  # the refinement converges tightly; the stages need not
-        stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, gnc_options.stage_rel_cost_tol))
+        stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, stage_tolerance(method, gnc_options)))
 
     def graduate(start_poses: np.ndarray, start: StageStart = "guess") -> GncOutcome:
         """The GNC stages of `method` from `(N, n, n)` poses, with a schedule of their own."""

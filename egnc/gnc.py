@@ -30,7 +30,7 @@ from egnc.factors import BetweenFactors
 from egnc.graph import PoseGraph
 from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
 from egnc.losses import FixedWeightLoss, KernelLoss
-from egnc.schedules import Schedule, Stage, ThresholdConvention, exceeds
+from egnc.schedules import FIXED_LAST_STAGE_METHODS, Schedule, Stage, ThresholdConvention, exceeds
 
 
 @dataclass(frozen=True)
@@ -98,9 +98,9 @@ class GncOptions:
         every_stage: solve every stage of the schedule even when, under restarts, only the last
             one decides the result: to watch the graduation stage by stage (same result, more time).
         stage_rel_cost_tol: graduated methods: each GNC stage stops when its relative cost
-            decrease falls below `max(this, SolverOptions.rel_cost_tol)` (GTSAM's GNC uses
-            1e-5); IRLS converges linearly, so a tight tolerance only costs iterations there.
-            The refinement then converges to the caller's tolerance.
+            decrease falls below `max(this, SolverOptions.rel_cost_tol)`; the decision rounds
+            (`refine`) then solve least squares to the caller's tolerance. None (default):
+            `stage_tolerance` chooses by the stage protocol.
 
     Every field is checked at construction (bools must be bools, `max_stages` an int, the
     numbers finite); a wrong type or value raises `OptionError` naming the field.
@@ -120,15 +120,16 @@ class GncOptions:
     regroup_start: bool = True
     elimination_start: bool = True
     every_stage: bool = False
-    stage_rel_cost_tol: float = 1e-6
+    stage_rel_cost_tol: float | None = None
 
     def __post_init__(self) -> None:
         """Check every field's type and range (`egnc.checks`), storing plain Python values."""
         checked: dict[str, object] = {
             "c": check_float("GncOptions.c", self.c, 0.0, open_low=True),
             "max_stages": check_int("GncOptions.max_stages", self.max_stages, 1),
-            "stage_rel_cost_tol": check_float("GncOptions.stage_rel_cost_tol", self.stage_rel_cost_tol, 0.0),
         }
+        if self.stage_rel_cost_tol is not None:
+            checked["stage_rel_cost_tol"] = check_float("GncOptions.stage_rel_cost_tol", self.stage_rel_cost_tol, 0.0)
         for name in ("threshold", "outlier_threshold"):
             checked[name] = check_choice(f"GncOptions.{name}", getattr(self, name), ("squared", "distance"))
         for name in ("outlier_quantile", "readmit_quantile"):
@@ -139,6 +140,25 @@ class GncOptions:
             checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
         for name, value in checked.items():
             object.__setattr__(self, name, value)
+
+
+RESTARTED_STAGE_TOL = 1e-4
+"""`stage_tolerance` where the stages restart from the initial guess towards a fixed last stage:
+only that stage is solved, and it only has to separate the loops for the decision rounds."""
+
+CHAINED_STAGE_TOL = 1e-6
+"""`stage_tolerance` where each stage's solution shapes the next (warm starts, carried weights)."""
+
+
+def stage_tolerance(method: str, options: GncOptions) -> float:
+    """The relative cost tolerance of `method`'s graduated stages: `options.stage_rel_cost_tol`, or
+    when None `RESTARTED_STAGE_TOL` for egnc and riSAM with restarted stages (the default) and
+    `CHAINED_STAGE_TOL` otherwise (`warm_start`, GNC-GM and GNC-TLS, which carry weights)."""
+    if options.stage_rel_cost_tol is not None:
+        return options.stage_rel_cost_tol
+    if method in FIXED_LAST_STAGE_METHODS and not options.warm_start:
+        return RESTARTED_STAGE_TOL
+    return CHAINED_STAGE_TOL
 
 
 StageKind = Literal["gnc", "decision", "probe", "elimination"]

@@ -47,6 +47,10 @@ METHODS = ("egnc", "risam", "gnc-gm", "gnc-tls", "huber", "cauchy", "gm", "l2")
 GRADUATED_METHODS = ("egnc", "risam", "gnc-gm", "gnc-tls")
 """The methods that graduate non-convexity over several stages."""
 
+FIXED_LAST_STAGE_METHODS = ("egnc", "risam")
+"""The graduated methods whose last stage is fixed in advance, `mu = 1` on every robust edge
+whatever came before (`Schedule.fixed_last_stage`)."""
+
 ThresholdConvention = Literal["squared", "distance"]
 
 

@@ -9,10 +9,25 @@ from scipy.stats import chi2
 from egnc.api import solve
 from egnc.datasets import add_false_loops, grid_world
 from egnc.errors import EgncError
-from egnc.gnc import GncOptions, classify_inliers, known_inlier_mask
+from egnc.gnc import (
+    CHAINED_STAGE_TOL,
+    RESTARTED_STAGE_TOL,
+    GncOptions,
+    classify_inliers,
+    known_inlier_mask,
+    stage_tolerance,
+)
 from egnc.kernels import gnc_barc2
 from egnc.mu_star import mu_star
-from egnc.schedules import METHODS, EgncSchedule, RisamSchedule, YangGncSchedule
+from egnc.schedules import (
+    FIXED_LAST_STAGE_METHODS,
+    GRADUATED_METHODS,
+    METHODS,
+    EgncSchedule,
+    RisamSchedule,
+    YangGncSchedule,
+    make_schedule,
+)
 
 
 @pytest.fixture(scope="module", params=[2, 3], ids=["2d", "3d"])
@@ -86,6 +101,39 @@ def test_restarted_stages_before_the_fixed_last_one_cannot_change_the_result(cor
     assert len(every_stage.stages) > len(skipped.stages)
     np.testing.assert_array_equal(every_stage.graph.poses, skipped.graph.poses)
     np.testing.assert_array_equal(every_stage.inliers, skipped.inliers)
+
+
+@pytest.mark.parametrize("method", GRADUATED_METHODS)
+def test_fixed_last_stage_methods_are_those_whose_schedule_has_one(method):
+    robust = np.ones(6, dtype=bool)
+    schedule = make_schedule(method, robust, 3)
+    schedule.first_stage(np.linspace(0.5, 20.0, 6))
+    assert (schedule.fixed_last_stage() is not None) == (method in FIXED_LAST_STAGE_METHODS)
+
+
+def test_stage_tolerance_follows_the_stage_protocol():
+    assert stage_tolerance("egnc", GncOptions()) == RESTARTED_STAGE_TOL
+    assert stage_tolerance("risam", GncOptions(every_stage=True)) == RESTARTED_STAGE_TOL
+    assert stage_tolerance("egnc", GncOptions(warm_start=True)) == CHAINED_STAGE_TOL
+    assert stage_tolerance("gnc-gm", GncOptions()) == CHAINED_STAGE_TOL
+    assert stage_tolerance("gnc-tls", GncOptions(stage_rel_cost_tol=1e-3)) == 1e-3
+    assert RESTARTED_STAGE_TOL > CHAINED_STAGE_TOL
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_restarted_stage_stops_at_its_own_tolerance_with_the_same_decision(dim):
+    # A noisier guess than corrupted_world's, so that the stage converges slowly.
+    world = grid_world(dim, 300, seed=11, noise_scale=1.0)
+    clean = solve(world.graph, "l2", init="chordal")
+    corrupted = add_false_loops(world.graph, 30, seed=12, reference_poses=clean.graph.poses)
+    default = solve(corrupted.graph, "egnc")
+    explicit = solve(corrupted.graph, "egnc", gnc_options=GncOptions(stage_rel_cost_tol=RESTARTED_STAGE_TOL))
+    tight = solve(corrupted.graph, "egnc", gnc_options=GncOptions(stage_rel_cost_tol=CHAINED_STAGE_TOL))
+    np.testing.assert_array_equal(default.graph.poses, explicit.graph.poses)
+    assert default.stages[0].iterations < tight.stages[0].iterations
+    np.testing.assert_array_equal(~default.inliers, corrupted.is_outlier)
+    np.testing.assert_array_equal(default.inliers, tight.inliers)
+    np.testing.assert_allclose(default.graph.poses, tight.graph.poses, atol=1e-6)
 
 
 def test_refinement_can_be_turned_off(corrupted_world):
