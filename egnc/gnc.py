@@ -97,10 +97,11 @@ class GncOptions:
             honest loops the map cannot vouch for.
         every_stage: solve every stage of the schedule even when, under restarts, only the last
             one decides the result: to watch the graduation stage by stage (same result, more time).
-        stage_rel_cost_tol: graduated methods: each GNC stage stops when its relative cost
-            decrease falls below `max(this, SolverOptions.rel_cost_tol)`; the decision rounds
-            (`refine`) then solve least squares to the caller's tolerance. None (default):
-            `stage_tolerance` chooses by the stage protocol.
+        stage_rel_cost_tol: graduated methods with `refine`: each GNC stage stops when its
+            relative cost decrease falls below `max(this, SolverOptions.rel_cost_tol)`, and the
+            decision rounds then solve least squares to the caller's tolerance (without
+            `refine` the stages do). None (default): chosen by the stage protocol
+            (`stage_tolerance`).
 
     Every field is checked at construction (bools must be bools, `max_stages` an int, the
     numbers finite); a wrong type or value raises `OptionError` naming the field.
