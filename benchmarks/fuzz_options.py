@@ -54,7 +54,7 @@ VALID: dict[str, tuple[object, ...]] = {
     "elimination_start": (True, False),
     "regroup_start": (True, False),
     "every_stage": (True, False),
-    "stage_rel_cost_tol": (0.0, 1e-6, 1e-3),
+    "stage_rel_cost_tol": (0.0, 1e-6, 1e-3, None),
 }
 NAN, INF = math.nan, math.inf
 _NUMBER = (NAN, INF, -INF, None, "1e-6", True, [1.0])
@@ -82,7 +82,7 @@ INVALID: dict[str, tuple[object, ...]] = {
     "elimination_start": ("no", 0.0),
     "regroup_start": (1, "off"),
     "every_stage": (1.0, "True"),
-    "stage_rel_cost_tol": (-1e-6, *_NUMBER),
+    "stage_rel_cost_tol": (-1e-6, NAN, INF, -INF, "1e-6", True, [1.0]),  # None: chosen by the protocol
 }
 SOLVER_FIELDS = ("method", "max_iterations", "rel_cost_tol", "gradient_tol", "step_tol", "initial_damping",
                  "max_damping", "linear_method", "trust_weight")  # fmt: skip
