@@ -19,7 +19,9 @@ Columns:
 - `ATE`: of the final result against the reference, metres, after rigid alignment; `ATE now`:
   of the online estimate before it (`OnlineSolver.poses`).
 - `updates`: updates (one per new pose); `loop updates`: those that added a loop closure;
-  `decided`: those decided at arrival (`UpdateReport.decided_at_arrival`: nothing solved).
+  `decided`: those decided at arrival (`UpdateReport.decided_at_arrival`: nothing solved);
+  `restarted`: those whose last stage started from the map before the update
+  (`UpdateReport.restarted`).
 - `iterations`: accepted solver steps summed over all updates (the final decision excluded).
 - `total s`: sum of the update times (reading, reference, final decision excluded);
   `decide s`: the final decision (`result()`: from the online estimate and from the batch solve);
@@ -60,14 +62,19 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         region_hops=args.region_hops or None,
         **({} if args.rel_cost_tol is None else {"rel_cost_tol": args.rel_cost_tol}),
     )
-    decided = []
+    decided, restarted = [], []
+
+    def on_step(step: int, total: int, report) -> None:
+        decided.append(report.decided_at_arrival)
+        restarted.append(report.restarted)
+
     outcome = replay(
         graph,
         method,
         known_inliers=known,
         linear_solver=args.linear_solver,
         online_options=options,
-        on_step=lambda step, total, report: decided.append(report.decided_at_arrival),
+        on_step=on_step,
     )
     steps = replay_steps(graph, known)
     # The running decision, in file order (the result already is): edge k of the solver is inserted[k].
@@ -95,6 +102,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         "updates": int(outcome.steps),
         "loop_updates": int(has_loop.sum()),
         "decided": int(np.sum(decided)),
+        "restarted": int(np.sum(restarted)),
         "iterations": int(iterations.sum()),
         "total_s": float(outcome.total_s),
         "decide_s": decide_s,
@@ -127,7 +135,7 @@ def cases(args: argparse.Namespace):
 
 HEADER = (
     "| dataset | % | method | P | R | P now | R now | ATE (m) | ATE now (m) | updates | loop updates | decided"
-    " | iterations"
+    " | restarted | iterations"
     " | total s | decide s | kept | p50 ms | p99 ms | max ms | loop p50 ms | ratio time / iterations |"
 )
 
@@ -171,7 +179,7 @@ def main() -> int:
             print(
                 f"| {name} | {percent:.0f} | {row['method']} | {row['P']:.4f} | {row['R']:.4f} | {row['P_now']:.4f}"
                 f" | {row['R_now']:.4f} | {row['ate']:.4f} | {row['ate_now']:.4f} | {row['updates']}"
-                f" | {row['loop_updates']} | {row['decided']}"
+                f" | {row['loop_updates']} | {row['decided']} | {row['restarted']}"
                 f" | {row['iterations']} | {row['total_s']:.1f} | {row['decide_s']:.2f} | {row['kept']}"
                 f" | {row['p50']:.1f} | {row['p99']:.1f} | {row['max']:.1f} | {row['loop_p50']:.1f} | {ratio} |",
                 flush=True,

@@ -12,6 +12,11 @@ by the schedule's rule (`egnc.schedules`, DESIGN.md sections 3 and 7):
 
 Each stage of the graduation is a warm-started IRLS solve (`egnc.least_squares`) of the whole
 current graph, or of the poses around the change (below), with the other loops at their own `mu`.
+The last stage (every graduating loop at `mu = 1`) starts from the lower of two maps, by their
+cost at its `mu`: the one the earlier stages left, or the one before the update. A false loop,
+quadratic at its `mu = 0` stage, bends the map towards itself; weighed at Geman-McClure, that
+map costs more than the one it came from, and IRLS from it takes many steps to undo the bend
+(docs/online.md). A true loop the map had drifted from keeps the bent map, which costs less.
 After the last stage every loop's `mu_init` is reset by its residual, as the reference
 implementations do after convergence: above the chi-square 0.9 quantile a loop starts at `mu = 1`
 the next time it is graduated (it stays switched off), below the 0.25 quantile at `mu = 0`. With
@@ -195,6 +200,8 @@ class UpdateReport:
         region_poses: poses the update solved as a local region (`egnc.region`); 0 when it
             solved nothing or only the whole map.
         whole_map: whether a stage solved the whole map (no region, or a fall-back from one).
+        restarted: whether the last stage started from the map before the update, which cost
+            less at the last stage's `mu` than the map the earlier stages had bent.
         status: termination code of the last solve (`egnc.least_squares.STATUS_MESSAGES`); -1 when
             nothing was solved.
     """
@@ -214,6 +221,7 @@ class UpdateReport:
     status: int
     region_poses: int = 0
     whole_map: bool = False
+    restarted: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,6 +236,7 @@ class _Graduation:
     region_poses: int = 0
     whole_map: bool = False
     doubtful: bool = False
+    restarted: bool = False
 
 
 @dataclass
@@ -463,6 +472,7 @@ class OnlineSolver:
             status=status,
             region_poses=outcome.region_poses,
             whole_map=outcome.whole_map,
+            restarted=outcome.restarted,
         )
         if status >= 0:
             self._last_status = status
@@ -716,6 +726,8 @@ class OnlineSolver:
         """
         tight, intermediate = self._stage_options()
         self._mu[graduating] = self._mu_init[graduating]
+        before_T, before_r = self._T, self._r.copy()  # the map before the update
+        restarted = False
         active = graduating & (self._mu < 1.0)  # loops whose mu still moves this update
         strong = np.zeros(len(self._edges), dtype=bool)
         stage_index = 0
@@ -724,6 +736,8 @@ class OnlineSolver:
         residuals: list[np.ndarray] = []
         while True:
             final = not np.any(active & (self._mu < 1.0))
+            if final and stage_index > 0:
+                restarted = self._start_from_lower(before_T, before_r)
             solution = self._solve_stage(local, tight if final else intermediate, trusted)
             reports.append(solution)
             history.append(self._mu[new_loops].copy())
@@ -743,7 +757,18 @@ class OnlineSolver:
             np.array(residuals).reshape(shape),
             reports[-1].status,
             doubtful=doubtful is not None and doubtful(),
+            restarted=restarted,
         )
+
+    def _start_from_lower(self, before_T: np.ndarray, before_r: np.ndarray) -> bool:
+        """Before the last stage: go back to the map before the update (poses `before_T`
+        `(N, n, n)`, residual norms `before_r` `(E,)`) when it costs less at the current `mu` than
+        the map the earlier stages bent; returns whether it did (module docstring)."""
+        loss = KernelLoss(self._kernel, self._mu, self._robust)
+        if float(np.sum(loss.cost(before_r))) >= float(np.sum(loss.cost(self._r))):
+            return False
+        self._T, self._r = before_T, before_r.copy()
+        return True
 
     def _solve_stage(self, local: LocalProblem | None, options: SolverOptions, trusted: np.ndarray) -> StageReport:
         """One stage at the current `mu`: the local problem's poses, or the whole map (None)."""
