@@ -91,7 +91,10 @@ class NormalEquationsPattern:
         if lower_only:
             pairs = pairs[pairs[:, 0] >= pairs[:, 1]]
         stride = max(num_free, 1)
-        block_keys = np.unique(pairs[:, 1] * stride + pairs[:, 0])
+        block_keys = np.sort(pairs[:, 1] * stride + pairs[:, 0])
+        # Unique by sorting: NumPy 2's hashing np.unique took 19x as long on these keys (0.59 ms
+        # against 0.03 ms for manhattanOlson3500's 10 000 lower blocks).
+        block_keys = block_keys[np.concatenate(([True], block_keys[1:] != block_keys[:-1]))]
         block_col, block_row = np.divmod(block_keys, stride)
         col_start = np.searchsorted(block_keys, np.arange(num_free + 1) * stride)
         rank = np.arange(len(block_keys)) - col_start[block_col]  # position within its block column
@@ -116,7 +119,11 @@ class NormalEquationsPattern:
         if lower_only:
             stored[rank == 0] = a >= b
         indices = np.empty(nnz, dtype=np.int64)
-        indices[slot[stored]] = np.broadcast_to(block_row[:, None, None] * d + a, slot.shape)[stored]
+        row_of = block_row[:, None, None] * d + a  # (blocks, d, 1): the row of scalar (a, b)
+        if lower_only:
+            indices[slot[stored]] = np.broadcast_to(row_of, slot.shape)[stored]
+        else:  # every scalar stored: no mask to gather through
+            indices[slot] = row_of
 
         # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes: the (d, d) sub-block of
         # rows `row_side` and columns `col_side` of P is the stored block of (row pose, column
