@@ -139,9 +139,9 @@ class OnlineOptions:
         decide_at_arrival: `egnc` only: predict an update's first stage (one Gauss-Newton step
             with its new loops at `mu = 0`) from the map factorized after the last whole-map solve
             (`egnc.arrival`), and solve nothing when the update would end where it starts, with
-            its new loops off (module docstring): about half the iterations on manhattanOlson3500
-            and the same final decisions, but the running decision can switch off true loops
-            (city10000) and the running estimate settle elsewhere (docs/online.md).
+            its new loops off (module docstring): fewer iterations and the same decisions, for a
+            factorization of the map after every whole-map solve (docs/online.md says when
+            that pays).
         rel_cost_tol: the last stage of an update stops when an accepted step lowers the cost
             by at most this fraction (riSAM stops at 1e-2; docs/online.md says how the default
             was chosen).
