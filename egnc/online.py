@@ -24,9 +24,8 @@ the next time it is graduated (it stays switched off), below the 0.25 quantile a
 loops, every older loop whose `mu_init` is 0, as riSAM re-graduates the loops its update touches:
 the loops that fit are then quadratic again while a new loop is weighed, and hold the map against
 it. With `"new"` only the new loops graduate and the older ones keep `mu = 1`; their Geman-McClure
-weights give way when a false loop bends the map at its `mu = 0` stage. Measured (BENCHMARKS.md):
-the same decisions and 5 to 30 % fewer iterations on CSAIL, Intel and manhattan_noisy.irl, but on
-manhattanOlson3500 with 30 % false loops precision 0.88 and ATE 27.6 m against 0.993 and 0.30 m.
+weights give way when a false loop bends the map at its `mu = 0` stage: fewer iterations, but a
+running estimate that went astray on some logs (docs/online.md has the measurements).
 
 Every loop stays in every solve with its IRLS weight, so a loop rejected early comes back when
 later evidence pulls the map towards it (its Geman-McClure weight grows as its residual falls,
@@ -120,8 +119,8 @@ class OnlineOptions:
         regraduate: which loops an update with new loop closures graduates: `"reference"`
             (default) the new ones and every older loop whose `mu_init` is 0, as riSAM
             re-graduates the loops its update touches; `"new"` only the new ones (older loops keep
-            their `mu`, 1 once graduated): fewer iterations, but false loops bent the map on
-            manhattanOlson3500 (module docstring).
+            their `mu`, 1 once graduated): fewer iterations, but the running estimate went
+            astray on some logs (docs/online.md).
         low_quantile: after an update's graduation, a loop with `r^2` (or `r`, by
             `GncOptions.threshold`) below `chi2.ppf(low_quantile, d)` gets `mu_init = 0`.
         high_quantile: ... and above `chi2.ppf(high_quantile, d)` gets `mu_init = 1`: it is not
