@@ -766,7 +766,7 @@ class OnlineSolver:
         loss = KernelLoss(self._kernel, self._mu, self._robust)
         if float(np.sum(loss.cost(before_r))) >= float(np.sum(loss.cost(self._r))):
             return False
-        self._T, self._r = before_T, before_r.copy()
+        self._T, self._r = before_T, before_r
         return True
 
     def _solve_stage(self, local: LocalProblem | None, options: SolverOptions, trusted: np.ndarray) -> StageReport:
