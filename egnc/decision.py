@@ -35,7 +35,9 @@ still come back, the rounds stop there and keep the one of lowest truncated cost
 
 Under the linear-Gaussian model the false-alarm rate per honest loop is below `1 - q` for the
 test of step 2 (an included loop's `r^2` is stochastically smaller than chi-square: it pulls the
-map towards itself) and `1 - q_readmit` for step 3.
+map towards itself) and `1 - q_readmit` for step 3, where `q_readmit` is raised on graphs of
+many loops so that the expected number of honest loops step 3 keeps out of one graph stays
+bounded (`readmit_quantile`).
 
 A rejected loop with `r^2 <= chi2.ppf(q_readmit, d)` passes without its covariance: the innovation
 statistic is never larger than `r^2`, since its covariance is the loop's own plus the map's (true
@@ -83,6 +85,22 @@ MAX_ROUNDS = 5
 
 READMIT_BATCH = 64
 """Rejected loops whose innovation statistics are computed together (one multi-column solve)."""
+
+
+def readmit_quantile(gnc_options: GncOptions, robust: np.ndarray) -> float:
+    """The chi-square quantile of re-admission's test on a graph whose loop closures are `robust` `(E,)`.
+
+    `gnc_options.readmit_quantile`, raised to `1 - readmit_false_alarms / L` on a graph of `L`
+    loop closures where that is higher. An honest loop fails the test with probability
+    `1 - quantile` under the linear-Gaussian model, so a fixed quantile keeps out a number of
+    honest loops that grows with the graph (5.6 expected among a 100 000-pose grid's 56 000);
+    the raised one bounds the expected number per graph (a Bonferroni correction).
+    """
+    quantile = gnc_options.readmit_quantile
+    num_loops = int(np.count_nonzero(robust))
+    if gnc_options.readmit_false_alarms is None or not num_loops:
+        return quantile
+    return max(quantile, 1.0 - gnc_options.readmit_false_alarms / num_loops)
 
 
 def readmitted(
@@ -354,7 +372,8 @@ def decide_outliers(
     reports: list[StageReport] = []
     settled = False
     components = connected_components(graph.num_poses, graph.edges)[0]  # isolated vertices count too
-    strict = replace(gnc_options, outlier_quantile=gnc_options.readmit_quantile)
+    readmit_at = readmit_quantile(gnc_options, robust)
+    strict = replace(gnc_options, outlier_quantile=readmit_at)
     ever_readmitted = np.zeros(graph.num_edges, dtype=bool)
     solved: dict[bytes, int] = {}  # classification -> its round in `rounds`
     rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []  # inliers, poses, r, truncated cost
@@ -373,7 +392,7 @@ def decide_outliers(
             # A loop the innovation test admitted is held to that test's quantile from then on
             # (module docstring, "Hysteresis").
             decided |= ever_readmitted & classify_inliers(r, robust, d, strict)
-            back = readmitted(problem, poses, factors, ~inliers, r, gnc_options.readmit_quantile)
+            back = readmitted(problem, poses, factors, ~inliers, r, readmit_at)
             ever_readmitted |= back
             decided = (decided & inliers) | back
         reports.append(least_squares_report(refined, started, int(inliers.sum()), "decision", start))

@@ -51,7 +51,7 @@ import time
 
 import numpy as np
 
-from egnc.decision import Decision, StartContext, least_squares_report, map_credit
+from egnc.decision import Decision, StartContext, least_squares_report, map_credit, readmit_quantile
 from egnc.factors import BetweenFactors
 from egnc.gnc import GncOptions, StageReport
 from egnc.graph import PoseGraph
@@ -118,7 +118,7 @@ def undecided(
         return np.zeros(len(rejected), dtype=bool)
     e = loops.residuals(decision.poses)
     own = np.linalg.inv(loops.information)
-    threshold = chi2_quantile(gnc_options.readmit_quantile, graph.tangent_dim)
+    threshold = chi2_quantile(readmit_quantile(gnc_options, robust), graph.tangent_dim)
     credit = map_credit(relative, own)[:, None, None]
     full, capped = (
         np.einsum("ki,ki->k", e, np.linalg.solve(S, e[:, :, None])[:, :, 0])

@@ -69,6 +69,11 @@ class GncOptions:
             the test of accepted loops because an excluded loop's residual is not shrunk by its
             own pull; the benchmark chose 0.9999 (BENCHMARKS.md): at 0.99 three true Intel
             loops that only agree with each other stayed out (precision 0.971 at 10%).
+        readmit_false_alarms: on a graph of `L` loop closures, re-admission's quantile is
+            raised to `1 - readmit_false_alarms / L` where that is above `readmit_quantile`
+            (by default on graphs of more than 10 000 loops): the expected number of honest
+            loops its test keeps out of one graph stays at most this many, however large the
+            graph (`egnc.decision.readmit_quantile`). None: every graph uses `readmit_quantile`.
         warm_start: start each stage from the previous stage's solution (True) or, as GTSAM's
             `GncOptimizer` does, from the initial guess (False). From a drifted odometry guess
             the first, least-squares stage bends the map to fit every false loop; warm-started
@@ -115,6 +120,7 @@ class GncOptions:
     refine: bool = True
     readmit: bool = True
     readmit_quantile: float = 0.9999
+    readmit_false_alarms: float | None = 1.0
     warm_start: bool = False
     chordal_start: bool = True
     chordal_all_start: bool = True
@@ -131,6 +137,10 @@ class GncOptions:
         }
         if self.stage_rel_cost_tol is not None:
             checked["stage_rel_cost_tol"] = check_float("GncOptions.stage_rel_cost_tol", self.stage_rel_cost_tol, 0.0)
+        if self.readmit_false_alarms is not None:
+            checked["readmit_false_alarms"] = check_float(
+                "GncOptions.readmit_false_alarms", self.readmit_false_alarms, 0.0, open_low=True
+            )
         for name in ("threshold", "outlier_threshold"):
             checked[name] = check_choice(f"GncOptions.{name}", getattr(self, name), ("squared", "distance"))
         for name in ("outlier_quantile", "readmit_quantile"):

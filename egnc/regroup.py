@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from egnc.connectivity import connected_components
-from egnc.decision import Decision, StartContext
+from egnc.decision import Decision, StartContext, readmit_quantile
 from egnc.factors import BetweenFactors, group_of
 from egnc.gnc import StageReport, classify_inliers
 from egnc.kernels import chi2_quantile
@@ -118,7 +118,7 @@ def regrouped_decision(context: StartContext, to_beat: Decision) -> tuple[Decisi
     """
     graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
     rejected = np.flatnonzero(robust & ~to_beat.inliers)
-    threshold = chi2_quantile(gnc_options.readmit_quantile, graph.tangent_dim)
+    threshold = chi2_quantile(readmit_quantile(gnc_options, robust), graph.tangent_dim)
     labels = loop_runs(factors.subset(rejected), to_beat.poses, threshold)
     in_run = np.bincount(labels, minlength=1)[labels] >= MIN_RUN
     if not in_run.any():

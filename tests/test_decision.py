@@ -14,7 +14,7 @@ import egnc.decision as decision_module
 import egnc.marginals as marginals_module
 from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import MAX_ROUNDS, decide_outliers, sequentially_consistent, truncated_cost
+from egnc.decision import MAX_ROUNDS, decide_outliers, readmit_quantile, sequentially_consistent, truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions
 from egnc.graph import PoseGraph
@@ -74,6 +74,30 @@ def test_a_5000_pose_grid_with_30_percent_false_loops_keeps_every_true_loop():
     corrupted = add_false_loops(graph, 30, seed=1, reference_poses=clean.graph.poses)
     result = solve(corrupted.graph)
     np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
+
+
+def test_readmission_quantile_is_raised_only_on_graphs_of_many_loops():
+    options = GncOptions()  # readmit_quantile 0.9999, readmit_false_alarms 1
+    robust = np.zeros(50_000, dtype=bool)
+    robust[:10_000] = True  # 1 / 10 000 = 1e-4: the per-loop quantile still rules
+    assert readmit_quantile(options, robust) == 0.9999
+    robust[:40_000] = True
+    assert readmit_quantile(options, robust) == pytest.approx(1 - 1 / 40_000, abs=1e-15)
+    assert readmit_quantile(dataclasses.replace(options, readmit_false_alarms=0.1), robust[:4000]) == pytest.approx(
+        1 - 0.1 / 4000, abs=1e-15
+    )
+    assert readmit_quantile(dataclasses.replace(options, readmit_false_alarms=None), robust) == 0.9999
+    assert readmit_quantile(options, np.zeros(10, dtype=bool)) == 0.9999
+
+
+def test_a_bound_on_false_alarms_per_graph_keeps_an_honest_loop_the_per_loop_rate_loses():
+    # 5123 loops with noise drawn as their information states: at a per-loop false-alarm rate of
+    # 1e-4, 0.5 honest loops are expected to fail re-admission, and here one does. (The default
+    # bound, 1 per graph, raises the quantile only past 10 000 loops; 0.1 does here.)
+    graph = grid_world(2, 10_000, seed=3).graph
+    per_loop = solve(graph, gnc_options=GncOptions(readmit_false_alarms=None))
+    assert np.count_nonzero(~per_loop.inliers) == 1
+    assert solve(graph, gnc_options=GncOptions(readmit_false_alarms=0.1)).inliers.all()
 
 
 def test_a_stage_at_its_iteration_limit_is_a_warning_not_converged():

@@ -67,6 +67,8 @@ BAD_GNC_OPTIONS = [
     ("outlier_quantile", 1.0),
     ("outlier_quantile", math.nan),
     ("readmit_quantile", 0.0),
+    ("readmit_false_alarms", 0.0),
+    ("readmit_false_alarms", "0.1"),
     ("stage_rel_cost_tol", -1e-6),
     ("stage_rel_cost_tol", math.inf),
     ("threshold", "cubed"),
