@@ -59,7 +59,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         # Rules of the egnc schedule: the risam rows run without them.
         strong_at_arrival=args.strong_at_arrival and method == "egnc",
         decide_at_arrival=args.decide_at_arrival and method == "egnc",
-        region_hops=args.region_hops or None,
+        **({} if args.region_hops is None else {"region_hops": args.region_hops or None}),
         **({} if args.rel_cost_tol is None else {"rel_cost_tol": args.rel_cost_tol}),
     )
     decided, restarted = [], []
@@ -148,7 +148,9 @@ def main() -> int:
     parser.add_argument("--methods", default="egnc,risam")
     parser.add_argument("--irl", default="manhattan_noisy", help="IRL logs (names in the datasets folder); '' for none")
     parser.add_argument("--stage-iterations", type=int, default=1, help="0: every stage converges")
-    parser.add_argument("--region-hops", type=int, default=0, help="OnlineOptions.region_hops; 0: the whole map")
+    parser.add_argument(
+        "--region-hops", type=int, help="OnlineOptions.region_hops (default: its default); 0: the whole map"
+    )
     parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
     parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
     parser.add_argument("--decide-at-arrival", action="store_true", help="OnlineOptions(decide_at_arrival=True)")

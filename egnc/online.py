@@ -35,24 +35,24 @@ accepted loops, re-test, re-admission by innovation) on the current estimate.
 
 What an update costs follows what changed: new poses are placed by composing their odometry from
 the current estimate, so an update that only extends the trajectory leaves every residual
-at the optimum and solves nothing. An update with a loop closure solves the whole map, unless it
-is decided at arrival (`egnc` schedule, `OnlineOptions(decide_at_arrival=True)`): its first stage (one
-Gauss-Newton step with the new loops at `mu = 0`) is predicted from a factorization of the map
-kept from the last whole-map solve (`egnc.arrival`), and when that stage would leave every new
-loop strong, the bent map would cost no less at `mu = 1` than the map before it, the last stage
-predicted from there (the new loops' IRLS with the rest of the map held) lets them go, and their
-pull on the map is below the update's tolerance, the update ends where it starts: the new loops
-are set to `mu = 1` and nothing is solved. With
-`OnlineOptions.region_hops` it first solves the poses within that many trusted edges of the new
-edges' ends, the poses around them held (`egnc.region`), and falls back to the whole map when
-the region's result is in doubt: when a loop closure crosses the strong-outlier line in the
-region (an older one either way, a new one outwards; checked after every stage), the update
-stops and is redone on the whole map from its start; when the region's boundary would still
-move (its poses' own Newton steps would lower the cost by more than `BOUNDARY_SHARE` of the
-update's tolerance), the last stage goes on over the whole map. A whole-map solve builds the
-grown system's normal-equations pattern in pose-row order (CG solves it; no fill-reducing order
-is computed) and analyses the preconditioner of the edges the map trusts (ordering and symbolic
-factorization, `egnc.step_solver`).
+at the optimum and solves nothing. An update with a loop closure first solves the poses within
+`OnlineOptions.region_hops` (8) trusted edges of the new edges' ends, the poses around them held
+(`egnc.region`), unless a new loop is already past the strong-outlier line before anything is
+solved, and falls back to the whole map when the region's result is in doubt: when a loop
+closure crosses the strong-outlier line in the region (an older one either way, a new one
+outwards; checked after every stage), the update stops and is redone on the whole map from its
+start; when the region's boundary would still move (its poses' own Newton steps would lower the
+cost by more than `BOUNDARY_SHARE` of the update's tolerance), the last stage goes on over the
+whole map. A whole-map solve builds the grown system's normal-equations pattern in pose-row
+order (CG solves it; no fill-reducing order is computed) and analyses the preconditioner of the
+edges the map trusts (ordering and symbolic factorization, `egnc.step_solver`).
+With `OnlineOptions(decide_at_arrival=True)` (`egnc` schedule) an update may solve nothing: its
+first stage (one Gauss-Newton step with the new loops at `mu = 0`) is predicted from a
+factorization of the map kept from the last whole-map solve (`egnc.arrival`), and when that
+stage would leave every new loop strong, the bent map would cost no less at `mu = 1` than the
+map before it, the last stage predicted from there (the new loops' IRLS with the rest of the map
+held) lets them go, and their pull on the map is below the update's tolerance, the update ends
+where it starts: the new loops are set to `mu = 1` and nothing is solved.
 
 Gauge: the pose of the first `add_prior` is held fixed at the prior's value (as `egnc.io.irl`
 does: the only absolute factor is satisfied exactly at the optimum, whatever its covariance);
@@ -144,12 +144,13 @@ class OnlineOptions:
         rel_cost_tol: the last stage of an update stops when an accepted step lowers the cost
             by at most this fraction (riSAM stops at 1e-2; docs/online.md says how the default
             was chosen).
-        region_hops: None (default): every update solves the whole map. N: an update first
-            solves the poses within N trusted edges of its new edges' ends, with their other
-            neighbours held (`egnc.region`), and falls back to the whole map when a loop crosses
-            the strong-outlier line in the region or its boundary would still move (module
-            docstring); faster on large maps, but its running estimate can part from the whole
-            map's (docs/online.md).
+        region_hops: an update with loop closures first solves the poses within this many
+            trusted edges of its new edges' ends, with their other neighbours held
+            (`egnc.region`), and falls back to the whole map when a loop crosses the
+            strong-outlier line in the region or its boundary would still move; an update
+            with a new loop already past that line goes to the whole map at once (module
+            docstring; docs/online.md has the measurements). None: every update solves the
+            whole map.
     """
 
     regraduate: Literal["reference", "new"] = "reference"
@@ -159,7 +160,7 @@ class OnlineOptions:
     strong_at_arrival: bool = False
     decide_at_arrival: bool = False
     rel_cost_tol: float = 1e-4
-    region_hops: int | None = None
+    region_hops: int | None = 8
 
     def __post_init__(self) -> None:
         if self.regraduate not in ("reference", "new"):
@@ -657,7 +658,9 @@ class OnlineSolver:
         preconditioner of the `trusted` `(E,)` edges."""
         hops = self.online_options.region_hops
         local = neighbourhoods = None
-        if seeds is not None and hops is not None:
+        # A new loop already past the strong-outlier line would cross it in a region (and send the
+        # update to the whole map from its start) whichever way it went: such updates go there at once.
+        if seeds is not None and hops is not None and not self._far()[new_loops].any():
             # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.of).
             neighbourhoods = Neighbourhoods.of(self._edges, len(self._vertex_ids), trusted)
             local = self._local_problem(neighbourhoods.within(seeds, hops), neighbourhoods)

@@ -150,10 +150,12 @@ def replay(
         # Checkpoints written before decide_at_arrival existed solved every update.
         saved = {key: meta.get(key, False if key == "decide_at_arrival" else None) for key in settings}
         if saved != settings:
-            raise EgncError(
-                f"{path}: the checkpoint belongs to another graph, method, region_hops or decide_at_arrival;"
-                " remove it or choose another"
+            differs = (
+                f"{key} {old!r} (this run: {settings[key]!r})" for key, old in saved.items() if old != settings[key]
             )
+            same_graph = saved["fingerprint"] == settings["fingerprint"]
+            what = ", ".join(differs) if same_graph else "another graph or edge roles"
+            raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
         done = int(meta["steps_done"])
     if solver is None:
         solver = OnlineSolver(

@@ -375,9 +375,11 @@ def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path, decide_at
     np.testing.assert_array_equal(resumed.result.inliers, whole.result.inliers)
     np.testing.assert_array_equal(resumed.update_iterations, whole.update_iterations)
     with pytest.raises(EgncError, match="another graph"):
-        replay(graph, "risam", checkpoint=path)
-    with pytest.raises(EgncError, match="region_hops"):
-        replay(graph, "egnc", checkpoint=path, online_options=replace(options, region_hops=8))
+        replay(_prefix(graph, 149), "egnc", checkpoint=path, online_options=options)
+    with pytest.raises(EgncError, match=r"method 'egnc' \(this run: 'risam'\)"):
+        replay(graph, "risam", checkpoint=path, online_options=options)
+    with pytest.raises(EgncError, match=r"region_hops 8 \(this run: None\)"):
+        replay(graph, "egnc", checkpoint=path, online_options=replace(options, region_hops=None))
     with pytest.raises(EgncError, match="decide_at_arrival"):
         replay(graph, "egnc", checkpoint=path, online_options=replace(options, decide_at_arrival=not decide_at_arrival))
 
@@ -552,31 +554,29 @@ def _chain_of_60(hops: int | None, odometry_information: float) -> OnlineSolver:
     return solver
 
 
-@pytest.mark.parametrize(
-    ("odometry_information", "measured", "loop_information", "redone"),
-    [(1000.0, 36.8, 100.0, False), (100.0, 35.0, 1e4, True)],
-)
-def test_a_region_that_would_strain_the_map_falls_back_to_the_whole_map(
-    odometry_information, measured, loop_information, redone
-):
-    # A loop 22 -> 59 that disagrees with the odometry (37 m): one hop around its ends cannot take it.
-    information = np.diag([1.0, 1.0, 4.0]) * loop_information
-    reports, poses = {}, {}
-    for hops in (1, None):
-        solver = _chain_of_60(hops, odometry_information)
-        solver.add_loop(22, 59, [measured, 0.0, 0.0], information)
-        reports[hops], poses[hops] = solver.update(), to_matrices(2, solver.poses)
-    local, whole = reports[1], reports[None]
+def _loop_22_59(hops: int | None, odometry_information: float, measured: float, loop_information: float):
+    """`_chain_of_60`, then a loop 22 -> 59 measuring `measured` m: its update's report and the poses after it."""
+    solver = _chain_of_60(hops, odometry_information)
+    solver.add_loop(22, 59, [measured, 0.0, 0.0], np.diag([1.0, 1.0, 4.0]) * loop_information)
+    return solver.update(), to_matrices(2, solver.poses)
+
+
+def test_a_region_that_would_strain_the_map_falls_back_to_the_whole_map():
+    # A loop 22 -> 59 that disagrees a little with the odometry (37 m): one hop around its ends cannot take it.
+    (local, local_poses), (whole, whole_poses) = (_loop_22_59(hops, 1000.0, 36.8, 100.0) for hops in (1, None))
+    assert whole.region_poses == 0 and whole.whole_map and all(stage.active_edges == 61 for stage in whole.stages)
     # One trusted hop from 22 and 59: 21, 23, 40 (by the true loop) and 58.
     assert local.region_poses == 6 and local.whole_map and local.stages[0].active_edges == 10
-    assert whole.region_poses == 0 and whole.whole_map and all(stage.active_edges == 61 for stage in whole.stages)
+    # The boundary still pulled on the rest: the whole map took the last stage on from the region's optimum.
     whole_map_stages = [stage for stage in local.stages if stage.active_edges == 61]
-    if redone:
-        # An older loop crossed the strong-outlier line in the region: the update was redone on
-        # the whole map from its start, so it ends exactly where the whole map's update does.
-        assert len(whole_map_stages) == len(whole.stages)
-        np.testing.assert_allclose(poses[1], poses[None], atol=1e-12)
-    else:
-        # The boundary still pulled on the rest: the whole map took the last stage on from the region's optimum.
-        assert len(whole_map_stages) == 1 and local.stages[-1].active_edges == 61
-        np.testing.assert_allclose(poses[1], poses[None], atol=1e-3)
+    assert len(whole_map_stages) == 1 and local.stages[-1].active_edges == 61
+    np.testing.assert_allclose(local_poses, whole_poses, atol=1e-3)
+
+
+def test_a_new_loop_past_the_strong_outlier_line_on_arrival_is_solved_on_the_whole_map():
+    # The loop disagrees by 2 m at 0.01 m: r = 200 before anything is solved. A region would see it
+    # cross the line and redo the update on the whole map; it is not tried.
+    (local, local_poses), (whole, whole_poses) = (_loop_22_59(hops, 100.0, 35.0, 1e4) for hops in (1, None))
+    assert local.region_poses == 0 and local.whole_map
+    assert [stage.active_edges for stage in local.stages] == [stage.active_edges for stage in whole.stages]
+    np.testing.assert_allclose(local_poses, whole_poses, atol=1e-12)

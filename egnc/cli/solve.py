@@ -18,6 +18,7 @@ import argparse
 import gc
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -164,7 +165,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=int_at_least(0),
         metavar="N",
         help="with --online: solve each loop update first on the poses within N trusted edges of its new"
-        " edges, falling back to the whole map when in doubt (default, or 0: always the whole map)",
+        f" edges, falling back to the whole map when in doubt (default {OnlineOptions().region_hops};"
+        " 0: always the whole map)",
     )
     parser.add_argument(
         "--decide-at-arrival",
@@ -275,9 +277,9 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
         online = None
         if args.online:
-            online_options = OnlineOptions(
-                region_hops=args.region_hops or None, decide_at_arrival=args.decide_at_arrival
-            )
+            online_options = OnlineOptions(decide_at_arrival=args.decide_at_arrival)
+            if args.region_hops is not None:
+                online_options = replace(online_options, region_hops=args.region_hops or None)
             outcome = replay(
                 graph,
                 args.method,
