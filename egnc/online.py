@@ -658,8 +658,8 @@ class OnlineSolver:
         preconditioner of the `trusted` `(E,)` edges."""
         hops = self.online_options.region_hops
         local = neighbourhoods = None
-        # A new loop already past the strong-outlier line would cross it in a region (and send the
-        # update to the whole map from its start) whichever way it went: such updates go there at once.
+        # A new loop already past the strong-outlier line nearly always ends past it in a region too,
+        # which sends the update to the whole map from its start: such updates go there at once.
         if seeds is not None and hops is not None and not self._far()[new_loops].any():
             # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.of).
             neighbourhoods = Neighbourhoods.of(self._edges, len(self._vertex_ids), trusted)
