@@ -25,6 +25,9 @@ import numpy as np
 
 from egnc.factors import Linearization
 
+PRODUCTS_CHUNK = 8192
+"""Edges whose normal-equation products `edge_products` computes at once."""
+
 
 @dataclass(frozen=True, eq=False)
 class NormalEquationsPattern:
@@ -176,5 +179,12 @@ def edge_products(linearization: Linearization, information: np.ndarray, weights
     """
     S = linearization.stacked
     d = S.shape[1]
-    W_S = (weights[:, None, None] * information) @ S
-    return S[:, :, : 2 * d].transpose(0, 2, 1) @ W_S
+    products = np.empty((len(S), 2 * d, 2 * d + 1))
+    # In chunks of edges: the temporaries `w Omega` and `w Omega S` of all edges at once were half
+    # the size of the products again (each product is its own small matrix product, so chunking
+    # does not change a digit).
+    for start in range(0, len(S), PRODUCTS_CHUNK):
+        chunk = slice(start, start + PRODUCTS_CHUNK)
+        W_S = (weights[chunk, None, None] * information[chunk]) @ S[chunk]
+        np.matmul(S[chunk, :, : 2 * d].transpose(0, 2, 1), W_S, out=products[chunk])
+    return products

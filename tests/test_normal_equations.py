@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+import egnc.normal_equations as normal_equations_module
 from egnc.factors import Linearization
-from egnc.normal_equations import NormalEquationsPattern
+from egnc.normal_equations import NormalEquationsPattern, edge_products
 
 
 def dense_normal_equations(edges, fixed, d, lin, information, weights):
@@ -100,3 +101,11 @@ def test_pattern_is_valid_csc():
     for col in range(pattern.size):
         rows = pattern.indices[pattern.indptr[col] : pattern.indptr[col + 1]]
         assert np.all(np.diff(rows) > 0), "rows within a column must be sorted and unique"
+
+
+@pytest.mark.parametrize("d", [3, 6])
+def test_edge_products_in_chunks_equal_one_product_of_all_edges_bit_for_bit(d, monkeypatch):
+    _, lin, information, weights = random_case(np.random.default_rng(7), 30, d)
+    whole = lin.stacked[:, :, : 2 * d].transpose(0, 2, 1) @ ((weights[:, None, None] * information) @ lin.stacked)
+    monkeypatch.setattr(normal_equations_module, "PRODUCTS_CHUNK", 7)  # 92 edges: 14 chunks, the last of one
+    np.testing.assert_array_equal(edge_products(lin, information, weights), whole)
