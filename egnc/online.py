@@ -658,9 +658,10 @@ class OnlineSolver:
         preconditioner of the `trusted` `(E,)` edges."""
         hops = self.online_options.region_hops
         local = neighbourhoods = None
+        was_far = self._far()
         # A new loop already past the strong-outlier line nearly always ends past it in a region too,
         # which sends the update to the whole map from its start: such updates go there at once.
-        if seeds is not None and hops is not None and not self._far()[new_loops].any():
+        if seeds is not None and hops is not None and not was_far[new_loops].any():
             # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.of).
             neighbourhoods = Neighbourhoods.of(self._edges, len(self._vertex_ids), trusted)
             local = self._local_problem(neighbourhoods.within(seeds, hops), neighbourhoods)
@@ -670,10 +671,9 @@ class OnlineSolver:
         region_poses = int(local.free.sum())
         before = self._T, self._r.copy(), self._mu.copy()
         # A region decides nothing alone: a loop that crosses the strong-outlier line in it (an
-        # older one either way, a new one outwards) is judged on the whole map instead. Held at
-        # its boundary, a region strains where the whole map would turn (egnc.region).
-        was_far = self._far()
-        was_far[new_loops] = False
+        # older one either way, a new one outwards: none is past it yet) is judged on the whole
+        # map instead. Held at its boundary, a region strains where the whole map would turn
+        # (egnc.region).
 
         def doubtful() -> bool:
             return bool(np.any(self._robust & (self._far() != was_far)))
