@@ -37,15 +37,14 @@ What an update costs follows what changed: new poses are placed by composing the
 the current estimate, so an update that only extends the trajectory leaves every residual
 at the optimum and solves nothing. An update with a loop closure first solves the poses within
 `OnlineOptions.region_hops` (8) trusted edges of the new edges' ends, the poses around them held
-(`egnc.region`), unless a new loop is already past the strong-outlier line before anything is
-solved, and falls back to the whole map when the region's result is in doubt: when a loop
-closure crosses the strong-outlier line in the region (an older one either way, a new one
-outwards; checked after every stage), the update stops and is redone on the whole map from its
-start; when the region's boundary would still move (its poses' own Newton steps would lower the
-cost by more than `BOUNDARY_SHARE` of the update's tolerance), the last stage goes on over the
-whole map. A whole-map solve builds the grown system's normal-equations pattern in pose-row
-order (CG solves it; no fill-reducing order is computed) and analyses the preconditioner of the
-edges the map trusts (ordering and symbolic factorization, `egnc.step_solver`).
+(`egnc.region`), and falls back to the whole map when the region's result is in doubt: when its
+stages end a loop closure on the other side of the strong-outlier line than it began (an older
+one either way, a new one outwards), the update is redone on the whole map from its start; when
+the region's boundary would still move (its poses' own Newton steps would lower the cost by more
+than `BOUNDARY_SHARE` of the update's tolerance), the last stage goes on over the whole map.
+A whole-map solve builds the grown system's normal-equations pattern in pose-row order (CG
+solves it; no fill-reducing order is computed) and analyses the preconditioner of the edges the
+map trusts (ordering and symbolic factorization, `egnc.step_solver`).
 With `OnlineOptions(decide_at_arrival=True)` (`egnc` schedule) an update may solve nothing: its
 first stage (one Gauss-Newton step with the new loops at `mu = 0`) is predicted from a
 factorization of the map kept from the last whole-map solve (`egnc.arrival`), and when that
@@ -67,7 +66,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Literal
@@ -146,11 +144,10 @@ class OnlineOptions:
             was chosen).
         region_hops: an update with loop closures first solves the poses within this many
             trusted edges of its new edges' ends, with their other neighbours held
-            (`egnc.region`), and falls back to the whole map when a loop crosses the
-            strong-outlier line in the region or its boundary would still move; an update
-            with a new loop already past that line goes to the whole map at once (module
-            docstring; docs/online.md has the measurements). None: every update solves the
-            whole map.
+            (`egnc.region`), and falls back to the whole map when the region's stages end a
+            loop on the other side of the strong-outlier line or its boundary would still move
+            (module docstring; docs/online.md has the measurements). None: every update solves
+            the whole map.
     """
 
     regraduate: Literal["reference", "new"] = "reference"
@@ -235,7 +232,6 @@ class _Graduation:
     analysed: bool = False
     region_poses: int = 0
     whole_map: bool = False
-    doubtful: bool = False
     restarted: bool = False
 
 
@@ -658,10 +654,7 @@ class OnlineSolver:
         preconditioner of the `trusted` `(E,)` edges."""
         hops = self.online_options.region_hops
         local = neighbourhoods = None
-        was_far = self._far()
-        # A new loop already past the strong-outlier line nearly always ends past it in a region too,
-        # which sends the update to the whole map from its start: such updates go there at once.
-        if seeds is not None and hops is not None and not was_far[new_loops].any():
+        if seeds is not None and hops is not None:
             # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.of).
             neighbourhoods = Neighbourhoods.of(self._edges, len(self._vertex_ids), trusted)
             local = self._local_problem(neighbourhoods.within(seeds, hops), neighbourhoods)
@@ -670,18 +663,11 @@ class OnlineSolver:
             return replace(self._stages(None, graduating, new_loops, trusted), analysed=analysed, whole_map=True)
         region_poses = int(local.free.sum())
         before = self._T, self._r.copy(), self._mu.copy()
-        # A region decides nothing alone: a loop that crosses the strong-outlier line in it (an
-        # older one either way, a new one outwards: none is past it yet) is judged on the whole
-        # map instead. Held at its boundary, a region strains where the whole map would turn
-        # (egnc.region).
-
-        def doubtful() -> bool:
-            return bool(np.any(self._robust & (self._far() != was_far)))
-
-        in_region = replace(self._stages(local, graduating, new_loops, trusted, doubtful), region_poses=region_poses)
+        was_far = self._far()
+        in_region = replace(self._stages(local, graduating, new_loops, trusted), region_poses=region_poses)
         if in_region.status == NUMERICAL_FAILURE:
             return in_region
-        if in_region.doubtful:
+        if self._crossed(was_far, new_loops):
             self._T, self._r, self._mu = before
             analysed = self._problem is None
             redone = self._stages(None, graduating, new_loops, trusted)
@@ -702,6 +688,20 @@ class OnlineSolver:
             )
         return in_region
 
+    def _crossed(self, was_far: np.ndarray, new_loops: np.ndarray) -> bool:
+        """Whether a region's stages ended a loop on the other side of the strong-outlier line
+        than `was_far` `(E,)` had it before them: an older loop either way, a new loop (`new_loops`)
+        outwards. Held at its boundary, a region strains where the whole map would turn
+        (`egnc.region`), so such a decision is the whole map's to make. Asked once the stages are
+        done: a new loop's `mu = 0` stage bends the region and pushes older loops past the line
+        for a stage, and the last stage, from the lower map, takes them back. A new loop that
+        arrived past the line and ends inside it was taken by a region stiffer than the map; the
+        boundary test decides whether the whole map takes the last stage on."""
+        far = self._far()
+        crossed = self._robust & (far != was_far)
+        crossed[new_loops] &= far[new_loops]
+        return bool(np.any(crossed))
+
     def _far(self) -> np.ndarray:
         """`(E,)` bool: edges whose current residual is past the strong-outlier line (`high_quantile`)."""
         return exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
@@ -719,13 +719,8 @@ class OnlineSolver:
         graduating: np.ndarray,
         new_loops: np.ndarray,
         trusted: np.ndarray,
-        doubtful: Callable[[], bool] | None = None,
     ) -> _Graduation:
-        """Graduate the loops `graduating` from `mu_init` on `local` (None: the whole map).
-
-        `doubtful`: asked after each stage; when it answers True the stages stop there, and the
-        result says so (`_Graduation.doubtful`).
-        """
+        """Graduate the loops `graduating` from `mu_init` on `local` (None: the whole map)."""
         tight, intermediate = self._stage_options()
         self._mu[graduating] = self._mu_init[graduating]
         before_T, before_r = self._T, self._r.copy()  # the map before the update
@@ -746,8 +741,6 @@ class OnlineSolver:
             residuals.append(self._r[new_loops].copy())
             if final or solution.status == NUMERICAL_FAILURE:
                 break
-            if doubtful is not None and doubtful():
-                return _Graduation(tuple(reports), np.zeros((0, 0)), np.zeros((0, 0)), solution.status, doubtful=True)
             stage_index += 1
             # EGNC's strong-outlier test uses the same chi-square 0.9 quantile as the mu_init reset.
             strong |= active & self._far()
@@ -758,7 +751,6 @@ class OnlineSolver:
             np.array(history).reshape(shape),
             np.array(residuals).reshape(shape),
             reports[-1].status,
-            doubtful=doubtful is not None and doubtful(),
             restarted=restarted,
         )
 
