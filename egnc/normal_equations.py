@@ -110,45 +110,46 @@ class NormalEquationsPattern:
         np.cumsum(counts.ravel(), out=indptr[1:])
         nnz = int(indptr[-1])
 
-        # slot[t, a, b]: data slot of scalar (a, b) of stored block t (unused where not stored).
+        # slot[t, a, b]: data slot of scalar (a, b) of stored block t (unused where not stored). Scalar
+        # column b of block column J starts at indptr[J d + b]; block t of rank k sits k d rows into
+        # it, less the b rows a lower-stored diagonal block (k = 0) skips above its diagonal.
         a, b = np.arange(d)[:, None], np.arange(d)[None, :]
-        k = rank[:, None, None]
-        if lower_only:  # the diagonal block (k = 0) holds rows b..d-1, then d rows per block
-            offset = np.where(k == 0, a - b, (d - b) + (k - 1) * d + a)
-        else:
-            offset = k * d + a
-        slot = indptr[block_col[:, None, None] * d + b] + offset
-        stored = np.ones(slot.shape, dtype=bool)
-        if lower_only:
-            stored[rank == 0] = a >= b
+        start = indptr[block_col[:, None] * d + b[0]] + rank[:, None] * d - skipped  # (blocks, d)
+        slot = start[:, None, :] + a  # (blocks, d, d)
         indices = np.empty(nnz, dtype=np.int64)
         row_of = block_row[:, None, None] * d + a  # (blocks, d, 1): the row of scalar (a, b)
-        if lower_only:
-            indices[slot[stored]] = np.broadcast_to(row_of, slot.shape)[stored]
+        if lower_only:  # every scalar is stored but those above the diagonal of a diagonal block (k = 0)
+            first, below = rank == 0, a >= b
+            indices[slot[~first]] = row_of[~first]
+            first_rows = np.broadcast_to(row_of[first], (int(np.count_nonzero(first)), d, d))
+            indices[slot[first][:, below]] = first_rows[:, below]
         else:  # every scalar stored: no mask to gather through
             indices[slot] = row_of
 
         # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes: the (d, d) sub-block of
         # rows `row_side` and columns `col_side` of P is the stored block of (row pose, column
         # pose), copied whole (its unstored scalars, or all of it when the block is not stored,
-        # go to the discard slot). Rows of the last column are the gradient of the row pose.
+        # go to the discard slot: the last block of `block_slots`). Rows of the last column are
+        # the gradient of the row pose.
         discard = nnz + size
-        block_slots = np.where(stored, slot, discard)  # (blocks, d, d)
-        slots = np.full((len(var), 2 * d, 2 * d + 1), discard, dtype=np.int64)
+        diagonal = np.flatnonzero(block_col == block_row)  # one per free pose, in order
+        diagonal_slots = slot[diagonal][:, np.arange(d), np.arange(d)].ravel()
+        block_slots = np.concatenate((slot, np.full((1, d, d), discard, dtype=np.int64)))  # (blocks + 1, d, d)
+        del slot  # the slots of P below are the largest array here
+        if lower_only:
+            block_slots[:-1][first] = np.where(below, block_slots[:-1][first], discard)
+        slots = np.empty((len(var), 2 * d, 2 * d + 1), dtype=np.int64)
         for row_side in range(2):
             for col_side in range(2):
                 rv, cv = var[:, row_side], var[:, col_side]
                 kept = (rv >= 0) & (cv >= 0) & ((rv >= cv) if lower_only else True)
-                query = cv[kept] * stride + rv[kept]
-                found = np.searchsorted(block_keys, query)
-                assert np.array_equal(block_keys[found], query), "pattern misses a block"
+                query = np.where(kept, cv * stride + rv, -1)
+                found = np.where(kept, np.searchsorted(block_keys, query), len(block_keys))
+                assert np.array_equal(block_keys[found[kept]], query[kept]), "pattern misses a block"
                 rows, cols = slice(row_side * d, (row_side + 1) * d), slice(col_side * d, (col_side + 1) * d)
-                slots[kept, rows, cols] = block_slots[found]
+                slots[:, rows, cols] = block_slots[found]
         row_var = var[:, np.arange(2 * d) // d]  # (E, 2d)
         slots[:, :, 2 * d] = np.where(row_var >= 0, nnz + row_var * d + np.arange(2 * d) % d, discard)
-
-        diagonal = np.flatnonzero(block_col == block_row)  # one per free pose, in order
-        diagonal_slots = slot[diagonal][:, np.arange(d), np.arange(d)].ravel()
         return cls(size, indptr, indices, lower_only, slots, diagonal_slots, free_index)
 
     def assemble(
