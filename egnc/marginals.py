@@ -233,10 +233,20 @@ def _reach_solve(factor: TriangularFactor, B: sp.csc_matrix) -> tuple[np.ndarray
         columns = lower[:, reach]
     from scipy.sparse.linalg import spsolve_triangular
 
-    restricted = sp.csc_matrix((columns.data, local[columns.indices], columns.indptr), shape=(len(reach),) * 2)
+    # In SuperLU's index type, with unit columns (L = L1 diag(l), so W = diag(l)^-1 L1^-1 rhs):
+    # spsolve_triangular would otherwise copy the whole restricted factor twice, to scale it and
+    # to cast its indices, and on a 50 000-pose 3D grid those copies set the robust solve's peak.
+    restricted = sp.csc_matrix(
+        (columns.data, local[columns.indices].astype(np.intc), columns.indptr.astype(np.intc)),
+        shape=(len(reach),) * 2,
+    )
+    del columns
+    inverse = 1.0 / restricted.data[restricted.indptr[:-1]]  # the diagonal leads each sorted column
+    restricted.data *= np.repeat(inverse, np.diff(restricted.indptr))
     rhs = sp.csc_matrix((B.data, local[rows], B.indptr), shape=(len(reach), B.shape[1])).toarray()
     with serial_native_threads():  # SuperLU's triangular solve calls SciPy's OpenBLAS
-        W = spsolve_triangular(restricted, rhs, lower=True, overwrite_A=True, overwrite_b=True)
+        W = spsolve_triangular(restricted, rhs, lower=True, unit_diagonal=True, overwrite_A=True, overwrite_b=True)
+    W *= inverse[:, None]
     return reach, W
 
 

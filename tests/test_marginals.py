@@ -100,6 +100,26 @@ def test_the_reach_solve_is_zero_outside_the_reach_and_exact_on_it(monkeypatch):
     assert len(outside) > 0 and np.all(full[outside] == 0.0)
 
 
+@pytest.mark.parametrize("backend", ["cholmod", "scipy"])
+def test_a_reach_solve_leaves_the_factor_as_it_was(backend, monkeypatch):
+    # The solve scales the restricted factor's columns in place: never the factor's own arrays,
+    # which every later quadratic form of the same factorization reads again.
+    if backend == "cholmod" and not cholmod_available():
+        pytest.skip("scikit-sparse is not installed")
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    factor = factorized(backend, chain_with_branches(300, seed=2)).triangular()
+    assert factor is not None
+    lower = factor.lower.copy()
+    B = sp.csc_matrix(([1.0, -1.0, 1.0, -1.0], ([7, 150, 60, 299], [0, 0, 1, 1])), shape=(300, 2))
+    first = marginals_module._reach_solve(factor, B)
+    second = marginals_module._reach_solve(factor, B)
+    assert first is not None and second is not None
+    np.testing.assert_array_equal(first[1], second[1])
+    assert (factor.lower != lower).nnz == 0
+    full = np.linalg.solve(lower.toarray(), B.toarray()[factor.order])
+    np.testing.assert_allclose(first[1], full[first[0]], rtol=1e-10, atol=1e-13)
+
+
 def test_a_factor_whose_columns_reach_past_their_tree_ancestors_is_solved_on_its_whole_reach(monkeypatch):
     # Column 0 holds rows 1 and 2, column 1 only its diagonal: the elimination tree (first row
     # below the diagonal) makes 1 the parent of 0 and misses that 0 reaches 2 directly.
