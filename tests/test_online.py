@@ -555,14 +555,15 @@ def test_region_hops_is_checked():
         OnlineOptions(region_hops=0)
 
 
-def _chain_of_60(hops: int | None, odometry_information: float) -> OnlineSolver:
-    """Sixty poses 1 m apart along x, and a true loop 22 -> 40 (18 m); each update solved around its change."""
+def _chain_of_60(hops: int | None, odometry_information: float, loop_length: float = 18.0) -> OnlineSolver:
+    """Sixty poses 1 m apart along x, and a loop 22 -> 40 measuring `loop_length` m (true at 18 m);
+    each update solved around its change."""
     solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(region_hops=hops))
     solver.add_prior(0, [0.0, 0.0, 0.0])
     for k in range(59):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1.0, 1.0, 10.0]) * odometry_information)
     solver.update()
-    solver.add_loop(22, 40, [18.0, 0.0, 0.0], np.diag([100.0, 100.0, 400.0]))
+    solver.add_loop(22, 40, [loop_length, 0.0, 0.0], np.diag([100.0, 100.0, 400.0]))
     solver.update()
     return solver
 
@@ -604,13 +605,7 @@ def test_an_older_loop_a_region_pushes_past_the_line_sends_the_update_to_the_who
     # The loop 22 -> 40 measures 18.4 m against 18 m of stiff odometry: it sits just inside the
     # strong-outlier line. A new loop 22 -> 59, 0.3 m shorter than the map, pulls 22 towards 59;
     # held one hop around its ends, the region takes that from the loop 22 -> 40 and pushes it past.
-    solver = OnlineSolver(2, "egnc", online_options=OnlineOptions(region_hops=1))
-    solver.add_prior(0, [0.0, 0.0, 0.0])
-    for k in range(59):
-        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], np.diag([1.0, 1.0, 10.0]) * 1000.0)
-    solver.update()
-    solver.add_loop(22, 40, [18.4, 0.0, 0.0], np.diag([100.0, 100.0, 400.0]))
-    solver.update()
+    solver = _chain_of_60(1, 1000.0, loop_length=18.4)
     line = chi2.ppf(OnlineOptions().high_quantile, 3)
     assert solver.residual_norms[59] ** 2 < line
     solver.save(tmp_path / "state.npz")
