@@ -320,6 +320,7 @@ class OnlineSolver:
         self._known_ids: set[int] = set()
         self._problem: Problem | None = None
         self._factors: BetweenFactors | None = None
+        self._neighbourhoods = Neighbourhoods()  # grown with the edges before each region is drawn
         self._converged: ConvergedMap | None = None  # the map after its last whole-map solve (egnc.arrival)
         self._last_status = -1
         self.last_update: UpdateReport | None = None
@@ -653,12 +654,13 @@ class OnlineSolver:
         """Run the stages of one update around `seeds` (pose rows; None: the whole map) with the
         preconditioner of the `trusted` `(E,)` edges."""
         hops = self.online_options.region_hops
-        local = neighbourhoods = None
+        local = None
+        neighbourhoods = self._neighbourhoods
         if seeds is not None and hops is not None:
-            # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.of).
-            neighbourhoods = Neighbourhoods.of(self._edges, len(self._vertex_ids), trusted)
-            local = self._local_problem(neighbourhoods.within(seeds, hops), neighbourhoods)
-        if local is None or neighbourhoods is None:
+            neighbourhoods.grow(self._edges, len(self._vertex_ids))
+            # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.within).
+            local = self._local_problem(neighbourhoods.within(seeds, hops, trusted), neighbourhoods)
+        if local is None:
             analysed = self._problem is None
             return replace(self._stages(None, graduating, new_loops, trusted), analysed=analysed, whole_map=True)
         region_poses = int(local.free.sum())

@@ -34,47 +34,94 @@ from egnc.normal_equations import edge_products
 __all__ = ["LocalProblem", "Neighbourhoods", "block_jacobi_decrease"]
 
 
-@dataclass(frozen=True, eq=False)
 class Neighbourhoods:
-    """Which poses and edges are near which.
+    """Which poses and edges are near which, grown as edges arrive.
+
+    An index of the edges at each pose (compressed rows: pose -> its edge indices) covers the
+    first edges; the edges added since form a tail that every query scans. The index is rebuilt
+    when the tail outgrows `TAIL_PER_ROOT` times the square root of the edge count, so a query
+    costs what the poses it asks about hold plus the tail, not a pass over every edge.
 
     Attributes:
         edges: `(E, 2)` pose rows of every edge.
-        hop_edges: `(H, 2)` pose rows of the edges a hop may take.
         num_poses: number of poses `N`.
     """
 
-    edges: np.ndarray
-    hop_edges: np.ndarray
-    num_poses: int
+    TAIL_PER_ROOT = 4
+    """The index is rebuilt when more than this times `sqrt(E)` edges (at least 256) are past it."""
+
+    def __init__(self) -> None:
+        self.edges = np.zeros((0, 2), dtype=np.int64)
+        self.num_poses = 0
+        self._indexed = 0  # edges in the index
+        self._indptr = np.zeros(1, dtype=np.int64)  # (indexed poses + 1,)
+        self._incident = np.zeros(0, dtype=np.int64)  # (2 * indexed,) edge indices by pose
 
     @classmethod
-    def of(cls, edges: np.ndarray, num_poses: int, hops_along: np.ndarray | None = None) -> Neighbourhoods:
-        """The neighbourhoods of `edges` `(E, 2)` (pose rows) among `num_poses` poses.
+    def of(cls, edges: np.ndarray, num_poses: int) -> Neighbourhoods:
+        """The neighbourhoods of `edges` `(E, 2)` (pose rows) among `num_poses` poses."""
+        neighbourhoods = cls()
+        neighbourhoods.grow(edges, num_poses)
+        return neighbourhoods
+
+    def grow(self, edges: np.ndarray, num_poses: int) -> None:
+        """Take the graph grown to `edges` `(E, 2)` (the earlier edges first, unchanged) and `num_poses`."""
+        self.edges, self.num_poses = edges, num_poses
+        tail = len(edges) - self._indexed
+        if tail > max(256, self.TAIL_PER_ROOT * np.sqrt(len(edges))):
+            self._rebuild()
+
+    def _rebuild(self) -> None:
+        ends = self.edges.reshape(-1)
+        order = np.argsort(ends, kind="stable")
+        self._incident = order // 2
+        self._indptr = np.zeros(self.num_poses + 1, dtype=np.int64)
+        np.cumsum(np.bincount(ends, minlength=self.num_poses), out=self._indptr[1:])
+        self._indexed = len(self.edges)
+
+    def _incident_to(self, rows: np.ndarray, among: np.ndarray) -> np.ndarray:
+        """Indices of the edges with an end among `rows` (`among`: `(N,)` bool mask of the same
+        rows); an edge with both ends there appears twice."""
+        indexed = rows[rows < len(self._indptr) - 1]
+        starts, stops = self._indptr[indexed], self._indptr[indexed + 1]
+        counts = stops - starts
+        # Concatenated ranges [start, stop) without a Python loop.
+        offsets = np.repeat(starts - np.cumsum(counts) + counts, counts)
+        gathered = self._incident[offsets + np.arange(int(counts.sum()))]
+        tail = self.edges[self._indexed :]
+        if not len(tail):
+            return gathered
+        return np.concatenate((gathered, self._indexed + np.flatnonzero(among[tail].any(axis=1))))
+
+    def within(self, seeds: np.ndarray, hops: int, hops_along: np.ndarray | None = None) -> np.ndarray:
+        """Sorted rows of the poses at most `hops` edges from a pose of `seeds` (the seeds included).
 
         `hops_along`: `(E,)` bool, the edges a hop may take (default all). A loop closure the
         map has switched off moves nothing, and random false loops would make every pose a few
         hops from every other.
         """
-        return cls(edges, edges if hops_along is None else edges[hops_along], num_poses)
-
-    def within(self, seeds: np.ndarray, hops: int) -> np.ndarray:
-        """Sorted rows of the poses at most `hops` edges from a pose of `seeds` (the seeds included)."""
         inside = np.zeros(self.num_poses, dtype=bool)
         inside[seeds] = True
+        frontier = np.flatnonzero(inside)
         for _ in range(hops):
-            # One vectorized pass over the edges per hop: no per-pose Python.
-            reached = self.hop_edges[inside[self.hop_edges].any(axis=1)]
-            if inside[reached].all():
+            among = np.zeros(self.num_poses, dtype=bool)
+            among[frontier] = True
+            edges = self._incident_to(frontier, among)
+            if hops_along is not None:
+                edges = edges[hops_along[edges]]
+            ends = self.edges[edges].reshape(-1)
+            reached = np.unique(ends[~inside[ends]])
+            if not len(reached):
                 break
             inside[reached] = True
+            frontier = reached
         return np.flatnonzero(inside)
 
     def edges_of(self, rows: np.ndarray) -> np.ndarray:
         """Sorted indices of the edges with at least one end among the poses `rows`."""
         among = np.zeros(self.num_poses, dtype=bool)
         among[rows] = True
-        return np.flatnonzero(among[self.edges].any(axis=1))
+        return np.unique(self._incident_to(np.flatnonzero(among), among))
 
 
 @dataclass(frozen=True, eq=False)

@@ -38,6 +38,42 @@ def test_edges_of_are_the_edges_with_an_end_among_the_poses():
     assert neighbourhoods.edges_of(rows).tolist() == expected.tolist() == [1, 2, 3, 19]
 
 
+def _within_by_passes(edges: np.ndarray, num_poses: int, seeds: np.ndarray, hops: int) -> np.ndarray:
+    """The reference: one pass over every edge per hop."""
+    inside = np.zeros(num_poses, dtype=bool)
+    inside[seeds] = True
+    for _ in range(hops):
+        inside[edges[inside[edges].any(axis=1)]] = True
+    return np.flatnonzero(inside)
+
+
+def test_a_grown_index_answers_as_passes_over_every_edge_do():
+    rng = np.random.default_rng(5)
+    num_poses = 3000
+    chain = np.stack([np.arange(num_poses - 1), np.arange(1, num_poses)], axis=1)
+    loops = rng.integers(0, num_poses, size=(1500, 2))
+    loops = loops[loops[:, 0] != loops[:, 1]]
+    edges = np.vstack([chain, loops])[rng.permutation(len(chain) + len(loops))]
+    neighbourhoods = Neighbourhoods()
+    grown = 0
+    rebuilt_with_a_tail = False
+    while grown < len(edges):
+        grown = min(len(edges), grown + int(rng.integers(1, 400)))
+        seen = edges[:grown]
+        poses = int(seen.max()) + 1
+        neighbourhoods.grow(seen, poses)
+        # Some states hold an index and a tail at once: both must be read.
+        rebuilt_with_a_tail |= 0 < neighbourhoods._indexed < grown
+        hops_along = rng.random(grown) < 0.7
+        seeds = rng.integers(0, poses, size=3)
+        hops = int(rng.integers(0, 6))
+        expected = _within_by_passes(seen[hops_along], poses, seeds, hops)
+        assert neighbourhoods.within(seeds, hops, hops_along).tolist() == expected.tolist()
+        rows = rng.choice(poses, size=20)
+        assert neighbourhoods.edges_of(rows).tolist() == np.flatnonzero(np.isin(seen, rows).any(axis=1)).tolist()
+    assert rebuilt_with_a_tail
+
+
 def _graph() -> PoseGraph:
     graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o")
     rng = np.random.default_rng(3)
