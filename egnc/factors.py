@@ -18,7 +18,8 @@ References:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from types import ModuleType
 
 import numpy as np
@@ -94,13 +95,13 @@ class BetweenFactors:
     edges: np.ndarray
     Z_inv: np.ndarray
     information: np.ndarray
-    # `(d, d, E)` copy of `information` with the off-diagonal entries doubled, for `whitened_norms`.
-    _quadratic_form: np.ndarray = field(init=False, repr=False)
 
-    def __post_init__(self) -> None:
+    @cached_property
+    def _quadratic_form(self) -> np.ndarray:
+        """`(d, d, E)` copy of `information` with the off-diagonal entries doubled, for
+        `whitened_norms`; made on first use, so that a graph's factors cost nothing to build."""
         d = self.information.shape[-1]
-        form = np.ascontiguousarray(np.moveaxis(self.information, 0, -1) * (2.0 - np.eye(d)[:, :, None]))
-        object.__setattr__(self, "_quadratic_form", form)
+        return np.ascontiguousarray(np.moveaxis(self.information, 0, -1) * (2.0 - np.eye(d)[:, :, None]))
 
     @classmethod
     def from_graph(cls, graph: PoseGraph) -> BetweenFactors:
