@@ -188,10 +188,17 @@ class Problem:
     """A graph's factors with its normal-equations pattern and linear solver, built once.
 
     Reusing one `Problem` across solves (e.g. GNC stages) reuses the symbolic factorization.
+
+    Attributes:
+        factors: the factors of every edge.
+        fixed: `(N,)` bool, the poses without unknowns (pose 0 when the graph fixed none).
+        pattern: the normal-equations pattern of the free poses.
+        linear_solver: the direct solver analysed for `pattern`.
+        step_solver: the step solver over `pattern` (`egnc.step_solver`).
     """
 
-    graph: PoseGraph
     factors: BetweenFactors
+    fixed: np.ndarray
     pattern: NormalEquationsPattern
     linear_solver: LinearSolver
     step_solver: StepSolver
@@ -204,30 +211,49 @@ class Problem:
         factors: BetweenFactors | None = None,
         fill_reducing: bool = True,
     ) -> Problem:
-        """Prepare `graph` for solving; the gauge is fixed on pose 0 unless some poses are fixed.
+        """Prepare `graph` for solving (`from_factors`); `factors`: the graph's factors if already
+        built (`BetweenFactors.subset` of a larger graph's)."""
+        return cls.from_factors(factors or BetweenFactors.from_graph(graph), graph.fixed, linear_solver, fill_reducing)
 
-        `factors`: the graph's factors if already built (`BetweenFactors.subset` of a larger graph's).
-        `fill_reducing`: False leaves the whole system in pose-row order, without computing a
-        fill-reducing order, for a problem solved once by CG with a given trusted set (the
-        online solver's): its direct solver then orders the system itself if a CG step falls back
-        to it.
+    @classmethod
+    def from_factors(
+        cls, factors: BetweenFactors, fixed: np.ndarray, linear_solver: str = "auto", fill_reducing: bool = True
+    ) -> Problem:
+        """Prepare the poses joined by `factors` for solving; the gauge is fixed on pose 0 unless
+        some poses are fixed.
+
+        `fixed`: `(N,)` bool, the poses held. `fill_reducing`: False leaves the whole system in
+        pose-row order, without computing a fill-reducing order, for a problem solved once by CG
+        with a given trusted set (the online solver's): its direct solver then orders the system
+        itself if a CG step falls back to it.
         """
         backend = resolve_name(linear_solver)
-        fixed = graph.fixed.copy()
+        fixed = np.array(fixed, dtype=bool)
         if not fixed.any():
             fixed[0] = True
+        d = factors.information.shape[-1]
         # Unknown blocks in a fill-reducing order of the free poses, computed once.
-        pattern, solver = analysed_pattern(graph.edges, fixed, graph.tangent_dim, backend, fill_reducing)
-        steps = StepSolver(graph.edges, fixed, graph.tangent_dim, backend, pattern, solver)
-        return cls(graph, factors or BetweenFactors.from_graph(graph), pattern, solver, steps)
+        pattern, solver = analysed_pattern(factors.edges, fixed, d, backend, fill_reducing)
+        steps = StepSolver(factors.edges, fixed, d, backend, pattern, solver)
+        return cls(factors, fixed, pattern, solver, steps)
+
+    @property
+    def num_poses(self) -> int:
+        """Number of poses N (free and fixed)."""
+        return len(self.fixed)
+
+    @property
+    def tangent_dim(self) -> int:
+        """Tangent dimension d: 3 in 2D, 6 in 3D."""
+        return int(self.factors.information.shape[-1])
 
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
-        group = group_of(self.graph.dim)
+        group = group_of(self.factors.dim)
         free_index = self.pattern.free_index
         free = free_index >= 0
         moved = T.copy()
-        moved[free] = group.rplus(T[free], step.reshape(-1, self.graph.tangent_dim)[free_index[free]])
+        moved[free] = group.rplus(T[free], step.reshape(-1, self.tangent_dim)[free_index[free]])
         return moved
 
 

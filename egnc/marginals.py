@@ -113,7 +113,7 @@ def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> n
     Solved in groups of columns so that memory stays bounded for many poses.
     """
     rows = np.asarray(rows, dtype=np.int64)
-    d = problem.graph.tangent_dim
+    d = problem.tangent_dim
     if not problem.pattern.size:
         return np.zeros((len(rows), d, d))
     B = transposed_jacobians(problem.pattern, rows[:, None], np.broadcast_to(np.eye(d), (len(rows), 1, d, d)))

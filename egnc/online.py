@@ -545,29 +545,31 @@ class OnlineSolver:
             self._factors = BetweenFactors(self.dim, self._edges, self._Z_inv, self._information)
         return self._factors
 
-    def _graph(self, num_poses: int | None = None, num_edges: int | None = None) -> PoseGraph:
-        """The current graph in insertion (row) order, poses at the current estimate; or the
-        graph of its first `num_poses` poses and `num_edges` edges. Its vertex ids are the rows:
-        poses may arrive in any id order, and a `PoseGraph` keeps its ids sorted."""
-        poses, edges = slice(num_poses), slice(num_edges)
-        rows = np.arange(len(self._vertex_ids))[poses]
-        fixed = np.zeros(len(rows), dtype=bool)
-        fixed[self._gauge] = self._gauge != 0  # the solver fixes row 0 itself
+    def _graph(self) -> PoseGraph:
+        """The current graph in insertion (row) order, poses at the current estimate. Its vertex
+        ids are the rows: poses may arrive in any id order, and a `PoseGraph` keeps its ids sorted."""
         return PoseGraph(
             dim=self.dim,
-            vertex_ids=rows,
-            poses=from_matrices(self.dim, self._T[poses]),
-            edges=self._edges[edges],
-            measurements=self._measurements[edges],
-            information=self._information[edges],
-            fixed=fixed,
+            vertex_ids=np.arange(len(self._vertex_ids)),
+            poses=from_matrices(self.dim, self._T),
+            edges=self._edges,
+            measurements=self._measurements,
+            information=self._information,
+            fixed=self._fixed(len(self._vertex_ids)),
         )
+
+    def _fixed(self, num_poses: int) -> np.ndarray:
+        """`(num_poses,)` bool: the gauge's row (the solver fixes row 0 itself when none is)."""
+        fixed = np.zeros(num_poses, dtype=bool)
+        fixed[self._gauge] = self._gauge != 0
+        return fixed
 
     def _current_problem(self) -> Problem:
         if self._problem is None:
             # Its whole system is solved by CG with the trusted preconditioner; only a fallback factorizes it.
-            self._problem = Problem.from_graph(
-                self._graph(), self.linear_solver, self._current_factors(), fill_reducing=False
+            # Every entry was checked when added: no PoseGraph to check them again.
+            self._problem = Problem.from_factors(
+                self._current_factors(), self._fixed(len(self._vertex_ids)), self.linear_solver, fill_reducing=False
             )
         return self._problem
 
@@ -621,7 +623,7 @@ class OnlineSolver:
         `_current_problem` built it when the graph had those."""
         edges = slice(num_edges)
         factors = BetweenFactors(self.dim, self._edges[edges], self._Z_inv[edges], self._information[edges])
-        return Problem.from_graph(self._graph(num_poses, num_edges), self.linear_solver, factors, fill_reducing=False)
+        return Problem.from_factors(factors, self._fixed(num_poses), self.linear_solver, fill_reducing=False)
 
     def _graduating(self, new_loops: np.ndarray) -> np.ndarray:
         """`(E,)` bool: the loops this update graduates from `mu_init` (module docstring)."""
@@ -646,7 +648,7 @@ class OnlineSolver:
         problem = problem or self._current_problem()
         num_edges = len(trusted)
         weights = KernelLoss(self._kernel, self._mu[:num_edges], self._robust[:num_edges]).weight(self._r[:num_edges])
-        return ConvergedMap.factorize(problem, self._T[: problem.graph.num_poses], weights, trusted)
+        return ConvergedMap.factorize(problem, self._T[: problem.num_poses], weights, trusted)
 
     def _graduate(
         self, graduating: np.ndarray, new_loops: np.ndarray, seeds: np.ndarray | None, trusted: np.ndarray
@@ -810,15 +812,7 @@ class OnlineSolver:
         """The local problem of `region` (pose rows); None (the whole map) when it holds most of it."""
         if len(region) > WHOLE_MAP_SHARE * len(self._vertex_ids):
             return None
-        return LocalProblem.build(
-            region,
-            neighbourhoods,
-            self._current_factors(),
-            self._measurements,
-            self._T,
-            self._gauge,
-            self.linear_solver,
-        )
+        return LocalProblem.build(region, neighbourhoods, self._current_factors(), self._gauge, self.linear_solver)
 
     def _boundary_strained(self, local: LocalProblem, neighbourhoods: Neighbourhoods) -> bool:
         """Whether the boundary poses' own Newton steps would lower the cost by more than

@@ -26,8 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from egnc.factors import BetweenFactors, from_matrices
-from egnc.graph import PoseGraph
+from egnc.factors import BetweenFactors
 from egnc.least_squares import Problem
 from egnc.normal_equations import edge_products
 
@@ -146,8 +145,6 @@ class LocalProblem:
         region: np.ndarray,
         neighbourhoods: Neighbourhoods,
         factors: BetweenFactors,
-        measurements: np.ndarray,
-        T: np.ndarray,
         held: int,
         linear_solver: str,
     ) -> LocalProblem:
@@ -157,8 +154,6 @@ class LocalProblem:
             region: `(R,)` sorted rows of the poses to solve.
             neighbourhoods: of the whole graph's edges.
             factors: the whole graph's factors.
-            measurements: `(E, P)` the whole graph's measurements in the stored parametrization.
-            T: `(N, n, n)` the whole graph's pose matrices.
             held: a row held fixed even inside the region (the gauge), or -1.
             linear_solver: backend name (`egnc.linear_solvers`).
         """
@@ -166,20 +161,9 @@ class LocalProblem:
         rows = np.unique(factors.edges[edges])
         local_edges = np.searchsorted(rows, factors.edges[edges])
         free = np.isin(rows, region) & (rows != held)
-        dim = factors.dim
-        d = factors.information.shape[-1]
-        graph = PoseGraph(
-            dim=dim,
-            vertex_ids=np.arange(len(rows)),
-            poses=from_matrices(dim, T[rows]),
-            edges=local_edges,
-            measurements=measurements[edges],
-            information=factors.information[edges].reshape(-1, d, d),
-            fixed=~free,
-        )
-        local_factors = BetweenFactors(dim, local_edges, factors.Z_inv[edges], factors.information[edges])
+        local_factors = BetweenFactors(factors.dim, local_edges, factors.Z_inv[edges], factors.information[edges])
         # A region is small: its direct solver orders it itself, cheaper than a block order.
-        return cls(rows, free, edges, Problem.from_graph(graph, linear_solver, local_factors, fill_reducing=False))
+        return cls(rows, free, edges, Problem.from_factors(local_factors, ~free, linear_solver, fill_reducing=False))
 
     @property
     def boundary(self) -> np.ndarray:

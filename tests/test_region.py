@@ -102,7 +102,7 @@ def test_the_local_problem_has_the_whole_graphs_gradient_and_hessian_at_its_free
     neighbourhoods = Neighbourhoods.of(graph.edges, graph.num_poses)
     region = neighbourhoods.within(np.array([100, 300]), 3)
     held = int(region[2])
-    local = LocalProblem.build(region, neighbourhoods, factors, graph.measurements, T, held, "scipy")
+    local = LocalProblem.build(region, neighbourhoods, factors, held, "scipy")
     assert np.isin(local.boundary, np.setdiff1d(local.rows, region)).sum() == len(local.boundary) - 1
     assert held in local.boundary and not np.isin(local.rows[local.free], held).any()
     assert np.array_equal(local.rows[local.free], np.setdiff1d(region, [held]))
