@@ -88,6 +88,7 @@ from egnc.losses import KernelLoss
 from egnc.mu_star import mu_star
 from egnc.region import LocalProblem, Neighbourhoods, block_jacobi_decrease
 from egnc.schedules import exceeds
+from egnc.validity import first_bad_quaternion
 
 __all__ = ["ONLINE_METHODS", "OnlineOptions", "OnlineSolver", "UpdateReport"]
 
@@ -338,7 +339,7 @@ class OnlineSolver:
     def add_poses(self, vertex_ids: ArrayLike, poses: ArrayLike | None = None) -> None:
         """Batch `add_pose`: `vertex_ids` `(K,)`, `poses` `(K, P)` or None."""
         ids = _ids(vertex_ids, 1)
-        values = None if poses is None else _array(poses, (len(ids), POSE_SIZE[self.dim]), "poses")
+        values = None if poses is None else self._poses_array(poses, len(ids), "poses")
         if len(set(ids.tolist())) < len(ids) or self._known_ids.intersection(ids.tolist()):
             raise GraphError(f"a pose among {ids[:5].tolist()} was already added")
         for k, vertex_id in enumerate(ids.tolist()):
@@ -350,7 +351,7 @@ class OnlineSolver:
         """Hold pose `vertex_id` at `pose` `(P,)`: the gauge of the map (module docstring); one per solver."""
         if self._has_prior or self._pending.prior is not None:
             raise GraphError("a second prior: the online solver uses one prior as the gauge")
-        value = _array(pose, (POSE_SIZE[self.dim],), "prior pose")
+        value = self._poses_array(np.reshape(pose, (1, -1)), 1, "prior pose")[0]
         vertex_id = int(vertex_id)
         if vertex_id not in self._known_ids:
             self.add_pose(vertex_id, value)
@@ -382,7 +383,7 @@ class OnlineSolver:
     def _add_edges(self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike, robust: bool) -> np.ndarray:
         pairs = _ids(ids, 2)
         k = len(pairs)
-        values = _array(measurements, (k, POSE_SIZE[self.dim]), "measurements")
+        values = self._poses_array(measurements, k, "measurements")
         info = _array(information, (k, self._d, self._d), "information")
         if not np.allclose(info, info.swapaxes(1, 2), rtol=1e-9, atol=0.0):
             raise GraphError("information matrices must be symmetric")
@@ -410,6 +411,15 @@ class OnlineSolver:
             self._pending.information.append(matrix)
             self._pending.robust.append(robust)
         return np.arange(first, first + k)
+
+    def _poses_array(self, values: ArrayLike, count: int, name: str) -> np.ndarray:
+        """`values` as `(count, P)` float64 poses, finite, with quaternions that normalize in 3D."""
+        array = _array(values, (count, POSE_SIZE[self.dim]), name)
+        found = first_bad_quaternion(array[:, 3:7]) if self.dim == 3 else None
+        if found:
+            where = f" row {found[0]}" if count > 1 else ""
+            raise GraphError(f"{name}{where}: {found[1]}")
+        return array
 
     # ------------------------------------------------------------------ updating
 

@@ -486,6 +486,21 @@ def test_inputs_are_checked():
         OnlineOptions(rel_cost_tol=1.0)
 
 
+def test_quaternions_that_do_not_normalize_are_refused_when_added():
+    solver = OnlineSolver(3, "egnc")
+    zero, identity = [0.0] * 7, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    with pytest.raises(GraphError, match="prior pose: quaternion"):
+        solver.add_prior(0, zero)
+    solver.add_prior(0, identity)
+    with pytest.raises(GraphError, match="poses row 1: quaternion"):
+        solver.add_poses([1, 2], [identity, zero])
+    with pytest.raises(GraphError, match="measurements: quaternion"):
+        solver.add_odometry(0, 1, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.eye(6))
+    # Nothing of the refused calls was taken in: the next update holds the prior's pose alone.
+    solver.update()
+    assert solver.num_poses == 1 and solver.num_edges == 0
+
+
 def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
     # The decision from the online estimate is replaced by one that keeps a false loop and drops the
     # true one (what a map bent early can give on large graphs); the batch solve from odometry sees
