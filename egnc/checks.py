@@ -17,19 +17,27 @@ import numpy as np
 from egnc.errors import OptionError, OptionTypeError
 
 
+def describe(value: object) -> str:
+    """A short description of a value for a one-line error message (never a whole array)."""
+    if isinstance(value, np.ndarray):
+        return f"an array of dtype {value.dtype} and shape {value.shape}"
+    text = repr(value)
+    return text if len(text) <= 40 and "\n" not in text else f"a {type(value).__name__}"
+
+
 def check_bool(name: str, value: object) -> bool:
     """`value` as a bool; only `True`, `False` and NumPy bools are accepted (not `"no"`, 0 or None)."""
     if not isinstance(value, (bool, np.bool_)):
-        raise OptionTypeError(f"{name} must be True or False, got {value!r}")
+        raise OptionTypeError(f"{name} must be True or False, got {describe(value)}")
     return bool(value)
 
 
 def check_int(name: str, value: object, minimum: int) -> int:
     """`value` as an int `>= minimum`; floats (even `2.0`) and bools are refused."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise OptionTypeError(f"{name} must be an integer, got {value!r}")
+        raise OptionTypeError(f"{name} must be an integer, got {describe(value)}")
     if value < minimum:
-        raise OptionError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        raise OptionError(f"{name} must be an integer >= {minimum}, got {describe(value)}")
     return int(value)
 
 
@@ -42,21 +50,21 @@ def check_float(
     always refused: every float option is a finite quantity.
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise OptionTypeError(f"{name} must be a number, got {value!r}")
+        raise OptionTypeError(f"{name} must be a number, got {describe(value)}")
     number = float(value)
     below = number <= low if open_low else number < low
     above = number >= high if open_high else number > high
     if not math.isfinite(number) or below or above:
         left, right = "(" if open_low else "[", ")" if open_high else "]"
         limits = f"{left}{low:g}, {high:g}{right}" if math.isfinite(high) else f"{left}{low:g}, inf)"
-        raise OptionError(f"{name} must be a finite number in {limits}, got {value!r}")
+        raise OptionError(f"{name} must be a finite number in {limits}, got {describe(value)}")
     return number
 
 
 def check_choice(name: str, value: object, choices: Collection[str]) -> str:
     """`value` if it is one of the strings `choices`."""
     if not isinstance(value, str) or value not in choices:
-        raise OptionError(f"unknown {name} {value!r}: choose one of {', '.join(choices)}")
+        raise OptionError(f"unknown {name} {describe(value)}: choose one of {', '.join(choices)}")
     return value
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from egnc.checks import describe
 from egnc.errors import GraphError, OptionError
 from egnc.validity import (
     NO_EDGES,
@@ -64,19 +65,11 @@ def _private_copy(name: str, value: object, dtype: type) -> np.ndarray:
         copy: np.ndarray = np.array(source, dtype=dtype)
     except (TypeError, ValueError):
         kind = "integers" if np.issubdtype(dtype, np.integer) else "bools" if dtype is bool else "numbers"
-        raise GraphError(f"{name} must be an array of {kind}, got {_describe(value)}") from None
+        raise GraphError(f"{name} must be an array of {kind}, got {describe(value)}") from None
     copy.setflags(write=False)
     view = copy.view()
     _OWNED[id(view)] = view
     return view
-
-
-def _describe(value: object) -> str:
-    """A short description of a value for an error message (never a whole array)."""
-    if isinstance(value, np.ndarray):
-        return f"an array of dtype {value.dtype} and shape {value.shape}"
-    text = repr(value)
-    return text if len(text) <= 40 else f"a {type(value).__name__}"
 
 
 def _is_owned(value: object) -> bool:
@@ -122,7 +115,7 @@ class PoseGraph:
 
     def __post_init__(self) -> None:
         if isinstance(self.dim, bool) or not isinstance(self.dim, (int, np.integer)) or self.dim not in POSE_SIZE:
-            raise GraphError(f"dim must be 2 or 3, got {_describe(self.dim)}")
+            raise GraphError(f"dim must be 2 or 3, got {describe(self.dim)}")
         object.__setattr__(self, "dim", int(self.dim))
         p, d = POSE_SIZE[self.dim], TANGENT_SIZE[self.dim]
         given = {name for name in _DTYPES if name not in ("fixed", "edge_lines") or getattr(self, name) is not None}

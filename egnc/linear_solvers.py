@@ -56,6 +56,7 @@ from typing import Any, Literal, Protocol
 import numpy as np
 import scipy.sparse as sp
 
+from egnc.checks import check_instance
 from egnc.errors import EgncError, SolverError
 
 LinearSolverName = Literal["auto", "cholmod", "rslab", "scipy"]
@@ -135,6 +136,7 @@ def resolve_name(name: str) -> Backend:
 
     `"auto"` prefers `cholmod`, then `rslab`, then `scipy` (BENCHMARKS.md, issue 18).
     """
+    check_instance("linear_solver", name, str, "a backend name (str)")
     if name == "auto":
         return "cholmod" if cholmod_available() else "rslab" if rslab_available() else "scipy"
     if name == "cholmod":
