@@ -6,7 +6,9 @@ option classes swapped; `write_g2o` and `read_g2o` with junk or swapped argument
 `marginal_covariances` of junk or of unknown ids; `subgraph_edges` and `with_poses` with
 wrong-shaped arrays; and `PoseGraph`s made directly or with `dataclasses.replace` from a valid
 graph with one array broken (information not positive definite, self-loops, no edges, ids
-unsorted, rows out of range, shapes wrong, a zero quaternion, NaN). Each must end in an
+unsorted, rows out of range, shapes wrong, a zero quaternion, NaN); and the online solver
+(`egnc.online`) built with junk options, given junk or inconsistent entries, asked for a result,
+a checkpoint or a load with junk arguments. Each must end in an
 `EgncError` (egnc's argument errors, `OptionError`, are `TypeError`s or `ValueError`s too) with
 a one-line message, within `fuzz.TIME_LIMIT_S`; anything else is a bug: a `TypeError` or
 `ValueError` egnc did not raise itself ("foreign error": NumPy's words, naming no argument),
@@ -32,6 +34,7 @@ import egnc
 from egnc.api import marginal_covariances
 from egnc.errors import EgncError
 from egnc.io import read_g2o, read_irl, write_g2o
+from egnc.online import OnlineOptions, OnlineSolver
 
 JUNK: tuple[object, ...] = (
     None, 0, -1, 2.5, float("nan"), True, "", "x", b"bytes", [], [1, 2], {}, {"max_iterations": 5}, (None,),
@@ -149,7 +152,74 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
             egnc.PoseGraph(**{**_fields(graph), **_broken_arrays(graph, rng)})  # type: ignore[arg-type]
         ),
         "PoseGraph: zero quaternion": lambda rng: egnc.solve(_graph3d_zero_quaternion(rng)),
+        "OnlineSolver: dim": lambda rng: OnlineSolver(_junk(rng)),  # type: ignore[arg-type]
+        "OnlineSolver: method": lambda rng: OnlineSolver(2, rng.choice(("EGNC", "gnc-gm", "", None, 1, np.zeros(2)))),  # type: ignore[arg-type]
+        "OnlineSolver: options": lambda rng: OnlineSolver(
+            2,
+            **{
+                rng.choice(("options", "gnc_options", "online_options", "linear_solver")): _junk(
+                    rng, not_=(str, egnc.SolverOptions, egnc.GncOptions)
+                )
+            },
+        ),
+        "OnlineOptions: field": lambda rng: OnlineOptions(**_bad_online_option(rng)),
+        "OnlineSolver: add": lambda rng: rng.choice(_bad_additions())(_online()),
+        "OnlineSolver: result, save, load": lambda rng: rng.choice(
+            (
+                lambda solver: solver.result(decide=_junk(rng, not_=(bool,))),
+                lambda solver: solver.save(_junk(rng, not_=(str,))),
+                lambda solver: solver.save(
+                    folder / "state.npz", meta=rng.choice(([1], "x", {"a": object()}, {"b": b"x"}))
+                ),
+                lambda solver: OnlineSolver.load(rng.choice((_junk(rng, not_=(str,)), path, folder / "none.npz"))),
+            )
+        )(_online()),
     }
+
+
+def _online() -> OnlineSolver:
+    """A 2D online solver holding two poses and their odometry, updated."""
+    solver = OnlineSolver(2)
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    solver.add_odometry(0, 1, [1.0, 0.0, 0.0], np.eye(3))
+    solver.update()
+    return solver
+
+
+def _bad_online_option(rng: random.Random) -> dict[str, object]:
+    """One `OnlineOptions` field with a value of the wrong type or out of range."""
+    bad = {
+        "regraduate": ("all", None, 1, np.zeros(2)),
+        "low_quantile": (0.0, 1.0, -1, "0.25", None, np.nan, np.zeros((2, 2))),
+        "high_quantile": (0.1, 1.5, None, True),  # 0.1: below the default low_quantile
+        "stage_iterations": (0, 2.5, "1", True),
+        "strong_at_arrival": ("yes", 1, None, np.zeros(2)),
+        "decide_at_arrival": ("no", 0, None),
+        "rel_cost_tol": (1.0, -1e-4, np.nan, "1e-4", None),
+        "region_hops": (0, -1, 2.5, True, "8"),
+    }
+    name = rng.choice(sorted(bad))
+    return {name: rng.choice(bad[name])}
+
+
+def _bad_additions() -> tuple[Callable[[OnlineSolver], object], ...]:
+    """Wrong `add_*` calls on a solver holding poses 0 and 1."""
+    eye = np.eye(3)
+    return (
+        lambda solver: solver.add_pose(1, [0.0, 0.0, 0.0]),  # already added
+        lambda solver: solver.add_pose(5, {"x": 1.0}),  # type: ignore[arg-type]
+        lambda solver: solver.add_poses([5, 6], [[0.0, 0.0, 0.0], [1.0]]),  # ragged
+        lambda solver: solver.add_odometry([1, 2], 3, [1.0, 0.0, 0.0], eye),
+        lambda solver: solver.add_odometry(1, 2, "x", eye),
+        lambda solver: solver.add_odometry(1, 2, [1.0, 0.0, 0.0], np.full((3, 3), np.nan)),
+        lambda solver: solver.add_odometry(1, 2, [1.0, 0.0, 0.0], -eye),
+        lambda solver: solver.add_loop(0, 99, [1.0, 0.0, 0.0], eye),  # unknown pose
+        lambda solver: solver.add_loop(0, 1.5, [1.0, 0.0, 0.0], eye),  # type: ignore[arg-type]
+        lambda solver: solver.add_loops(0, [[1.0, 0.0, 0.0]], [eye]),
+        lambda solver: solver.add_loops([[0, 1]], [[1.0, 0.0]], [eye]),
+        lambda solver: solver.add_prior(1, [0.0, 0.0, 0.0]),  # a second prior
+        lambda solver: OnlineSolver(3).add_prior(0, [0.0] * 7),  # a zero quaternion
+    )
 
 
 def _fields(graph: egnc.PoseGraph) -> dict[str, object]:

@@ -65,18 +65,20 @@ References:
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from egnc.api import Result, decided_fields, solve
 from egnc.arrival import ConvergedMap, FirstStage
+from egnc.checks import check_bool, check_choice, check_float, check_instance, check_int, describe
 from egnc.decision import decide_outliers
-from egnc.errors import EgncError, GraphError
+from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
 from egnc.gnc import GncOptions, StageReport, classify_inliers
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
@@ -161,16 +163,26 @@ class OnlineOptions:
     region_hops: int | None = 8
 
     def __post_init__(self) -> None:
-        if self.regraduate not in ("reference", "new"):
-            raise EgncError(f"unknown regraduate {self.regraduate!r}: choose 'reference' or 'new'")
-        if not 0.0 < self.low_quantile < self.high_quantile < 1.0:
-            raise EgncError("need 0 < low_quantile < high_quantile < 1")
-        if not 0.0 <= self.rel_cost_tol < 1.0:
-            raise EgncError(f"rel_cost_tol must be in [0, 1), got {self.rel_cost_tol}")
-        if self.stage_iterations is not None and self.stage_iterations < 1:
-            raise EgncError(f"stage_iterations must be at least 1, got {self.stage_iterations}")
-        if self.region_hops is not None and (isinstance(self.region_hops, bool) or self.region_hops < 1):
-            raise EgncError(f"region_hops must be at least 1 or None, got {self.region_hops}")
+        """Check every field's type and range (`egnc.checks`), storing plain Python values."""
+        name = "OnlineOptions."
+        checked: dict[str, object] = {
+            "regraduate": check_choice(name + "regraduate", self.regraduate, ("reference", "new")),
+            "rel_cost_tol": check_float(name + "rel_cost_tol", self.rel_cost_tol, 0.0, 1.0, open_high=True),
+        }
+        low, high = (
+            check_float(name + field_name, getattr(self, field_name), 0.0, 1.0, open_low=True, open_high=True)
+            for field_name in ("low_quantile", "high_quantile")
+        )
+        if not low < high:
+            raise OptionError(f"need {name}low_quantile < {name}high_quantile, got {low} and {high}")
+        checked["low_quantile"], checked["high_quantile"] = low, high
+        for field_name in ("strong_at_arrival", "decide_at_arrival"):
+            checked[field_name] = check_bool(name + field_name, getattr(self, field_name))
+        for field_name in ("stage_iterations", "region_hops"):  # None: no limit / no region
+            value = getattr(self, field_name)
+            checked[field_name] = None if value is None else check_int(name + field_name, value, 1)
+        for field_name, value in checked.items():
+            object.__setattr__(self, field_name, value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -283,15 +295,21 @@ class OnlineSolver:
         gnc_options: GncOptions | None = None,
         online_options: OnlineOptions | None = None,
     ):
-        if dim not in POSE_SIZE:
-            raise EgncError(f"dim must be 2 or 3, got {dim}")
-        if method not in ONLINE_METHODS:
-            raise EgncError(f"unknown online method {method!r}: choose one of {', '.join(ONLINE_METHODS)}")
+        if isinstance(dim, (bool, np.bool_)) or not isinstance(dim, (int, np.integer)) or dim not in POSE_SIZE:
+            raise OptionError(f"dim must be 2 or 3, got {describe(dim)}")
+        check_choice("online method", method, ONLINE_METHODS)
+        for name, value, kind in (
+            ("options", options, SolverOptions),
+            ("gnc_options", gnc_options, GncOptions),
+            ("online_options", online_options, OnlineOptions),
+        ):
+            if value is not None:
+                check_instance(name, value, kind)
         rules = ("strong_at_arrival", "decide_at_arrival")
         egnc_only = [name for name in rules if getattr(online_options, name, False)]
         if method != "egnc" and egnc_only:
             raise EgncError(f"OnlineOptions.{egnc_only[0]} applies to the egnc schedule (EGNC's strong-outlier rule)")
-        self.dim, self.method = dim, method
+        self.dim, self.method = int(dim), method
         self.linear_solver = resolve_name(linear_solver)
         self.options = options or SolverOptions()
         self.gnc_options = gnc_options or GncOptions()
@@ -334,7 +352,7 @@ class OnlineSolver:
         Without `pose`, the pose must be reached by an odometry edge added before the next update,
         which places it by composing the measurement from the other end's current estimate.
         """
-        self.add_poses([vertex_id], None if pose is None else np.reshape(pose, (1, -1)))
+        self.add_poses([vertex_id], None if pose is None else _one(pose))
 
     def add_poses(self, vertex_ids: ArrayLike, poses: ArrayLike | None = None) -> None:
         """Batch `add_pose`: `vertex_ids` `(K,)`, `poses` `(K, P)` or None."""
@@ -351,8 +369,11 @@ class OnlineSolver:
         """Hold pose `vertex_id` at `pose` `(P,)`: the gauge of the map (module docstring); one per solver."""
         if self._has_prior or self._pending.prior is not None:
             raise GraphError("a second prior: the online solver uses one prior as the gauge")
-        value = self._poses_array(np.reshape(pose, (1, -1)), 1, "prior pose")[0]
-        vertex_id = int(vertex_id)
+        value = self._poses_array(_one(pose), 1, "prior pose")[0]
+        ids = _ids(vertex_id, 1)
+        if len(ids) != 1:
+            raise GraphError(f"add_prior takes one vertex id, got {len(ids)}")
+        vertex_id = int(ids[0])
         if vertex_id not in self._known_ids:
             self.add_pose(vertex_id, value)
         self._pending.prior = (vertex_id, value)
@@ -366,11 +387,11 @@ class OnlineSolver:
             measurement: `(P,)` relative pose in the stored parametrization.
             information: `(d, d)` information matrix, translation first (g2o order).
         """
-        return int(self.add_odometry_batch([[i, j]], np.asarray(measurement)[None], np.asarray(information)[None])[0])
+        return int(self.add_odometry_batch(_pair(i, j), _one(measurement), _one(information))[0])
 
     def add_loop(self, a: int, b: int, measurement: ArrayLike, information: ArrayLike) -> int:
         """Add a loop closure (a candidate outlier) measuring `X_a^-1 X_b`; both poses must be known."""
-        return int(self.add_loops([[a, b]], np.asarray(measurement)[None], np.asarray(information)[None])[0])
+        return int(self.add_loops(_pair(a, b), _one(measurement), _one(information))[0])
 
     def add_odometry_batch(self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike) -> np.ndarray:
         """Batch `add_odometry`: `ids` `(K, 2)`, `measurements` `(K, P)`, `information` `(K, d, d)`."""
@@ -943,6 +964,7 @@ class OnlineSolver:
         solve), the decision rounds from the online estimate (start `"online"`), then the batch
         solve's stages; `iterations` counts all. `start` says which decision was kept.
         """
+        check_bool("decide", decide)
         if self._pending:
             raise EgncError("entries were added after the last update: call update() first")
         if not len(self._vertex_ids):
@@ -1071,6 +1093,10 @@ class OnlineSolver:
         Raises:
             EgncError: entries were added after the last update (update first).
         """
+        check_instance("path", path, (str, os.PathLike), "a file path")
+        if not os.fspath(path):
+            raise OptionError("path must name a file, got ''")
+        check_instance("meta", {} if meta is None else meta, dict)
         if self._pending:
             raise EgncError("entries were added after the last update: call update() before save()")
         settings = {
@@ -1087,7 +1113,7 @@ class OnlineSolver:
             "last_status": self._last_status,
             # The factorized map is rebuilt on load from the state it was factorized at (its first poses and edges).
             "converged_poses": None if self._converged is None else self._converged.num_poses,
-            "meta": meta or {},
+            "meta": {} if meta is None else meta,
         }
         arrays = {
             "vertex_ids": self._vertex_ids,
@@ -1105,8 +1131,12 @@ class OnlineSolver:
             "update_ms": np.array(self._update_ms),
             "update_iterations": np.array(self._update_iterations, dtype=np.int64),
         }
+        try:
+            text = json.dumps(settings)
+        except (TypeError, ValueError) as error:
+            raise OptionError(f"meta must hold only JSON data (dicts, lists, strings, numbers): {error}") from None
         with atomic_binary_file(Path(path)) as out:
-            np.savez(out, settings=np.array(json.dumps(settings)), **arrays)  # type: ignore[arg-type]
+            np.savez(out, settings=np.array(text), **arrays)  # type: ignore[arg-type]
 
     @classmethod
     def load(cls, path: str | Path) -> tuple[OnlineSolver, dict]:
@@ -1115,6 +1145,7 @@ class OnlineSolver:
         Raises:
             EgncError: the file is not an egnc checkpoint of this version, or cannot be read.
         """
+        check_instance("path", path, (str, os.PathLike), "a file path")
         try:
             with np.load(Path(path), allow_pickle=False) as data:
                 settings = json.loads(str(data["settings"]))
@@ -1150,11 +1181,29 @@ class OnlineSolver:
         return solver, settings["meta"]
 
 
+def _pair(i: int, j: int) -> ArrayLike:
+    """The ids of one edge as a one-row batch for `_ids`; each must be one integer."""
+    for vertex_id in (i, j):
+        if isinstance(vertex_id, (bool, np.bool_)) or not isinstance(vertex_id, (int, np.integer)):
+            raise GraphError(f"vertex ids must be integers, got {describe(vertex_id)}")
+    return [[int(i), int(j)]]
+
+
+def _one(value: object) -> ArrayLike:
+    """`value` as a one-row batch, unconverted: junk or ragged input fails in `_array`, which names it."""
+    return cast(ArrayLike, [value])
+
+
 def _ids(values: ArrayLike, width: int) -> np.ndarray:
     """Vertex ids as int64, `(K,)` for `width` 1 or `(K, 2)` for 2; non-negative."""
-    array = np.asarray(values)
+    try:
+        array = np.asarray(values)
+    except ValueError:  # ragged nesting
+        raise GraphError(f"vertex ids must be integers, got {describe(values)}") from None
     if array.dtype.kind not in "iu":
         raise GraphError(f"vertex ids must be integers, got {array.dtype}")
+    if array.size % width:
+        raise GraphError(f"edge ids come in pairs, got {array.size} ids")
     array = array.astype(np.int64).reshape(-1) if width == 1 else array.astype(np.int64).reshape(-1, 2)
     if np.any(array < 0):
         raise GraphError("vertex ids must be non-negative")
@@ -1163,7 +1212,10 @@ def _ids(values: ArrayLike, width: int) -> np.ndarray:
 
 def _array(values: ArrayLike, shape: tuple[int, ...], name: str) -> np.ndarray:
     """`values` as float64 of exactly `shape`, finite."""
-    array = np.asarray(values, dtype=np.float64)
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):  # not numbers, or ragged nesting
+        raise GraphError(f"{name} must be numbers of shape {shape}") from None
     if array.shape != shape:
         raise GraphError(f"{name} has shape {array.shape}, expected {shape}")
     if not np.all(np.isfinite(array)):

@@ -14,7 +14,7 @@ import egnc.online
 from egnc.datasets import add_false_loops
 from egnc.datasets.labels import read_labels
 from egnc.decision import Decision, truncated_cost
-from egnc.errors import EgncError, GraphError
+from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import from_matrices, group_of, to_matrices
 from egnc.graph import PoseGraph
 from egnc.kernels import make_kernel
@@ -484,6 +484,39 @@ def test_inputs_are_checked():
         OnlineSolver(2, "gnc-gm")
     with pytest.raises(EgncError, match="rel_cost_tol"):
         OnlineOptions(rel_cost_tol=1.0)
+
+
+def test_options_and_arguments_of_the_wrong_kind_fail_at_once_naming_them(tmp_path):
+    with pytest.raises(OptionError, match=r"OnlineOptions.region_hops must be an integer, got 2.5"):
+        OnlineOptions(region_hops=2.5)  # type: ignore[arg-type]
+    with pytest.raises(OptionError, match="OnlineOptions.strong_at_arrival must be True or False"):
+        OnlineOptions(strong_at_arrival=1)  # type: ignore[arg-type]
+    with pytest.raises(OptionError, match="low_quantile < OnlineOptions.high_quantile"):
+        OnlineOptions(high_quantile=0.1)
+    with pytest.raises(OptionError, match="options must be a SolverOptions, got int"):
+        OnlineSolver(2, options=0)  # type: ignore[arg-type]
+    with pytest.raises(OptionError, match=r"dim must be 2 or 3, got an array of dtype float64 and shape \(2, 2\)"):
+        OnlineSolver(np.zeros((2, 2)))  # type: ignore[arg-type]
+    with pytest.raises(OptionError, match="linear_solver must be a backend name"):
+        OnlineSolver(2, linear_solver=np.zeros(3))  # type: ignore[arg-type]
+    solver = OnlineSolver(np.int64(2))  # type: ignore[arg-type]
+    assert type(solver.dim) is int and solver.dim == 2
+    solver.add_prior(np.int32(0), [0.0, 0.0, 0.0])  # type: ignore[arg-type]
+    with pytest.raises(GraphError, match=r"measurements must be numbers of shape \(1, 3\)"):
+        solver.add_odometry(0, 1, "x", np.eye(3))  # type: ignore[arg-type]
+    with pytest.raises(GraphError, match="vertex ids must be integers"):
+        solver.add_odometry([0, 1], 2, [1.0, 0.0, 0.0], np.eye(3))  # type: ignore[arg-type]
+    with pytest.raises(GraphError, match="edge ids come in pairs, got 3"):
+        solver.add_loops([0, 1, 2], [[1.0, 0.0, 0.0]], [np.eye(3)])
+    solver.add_odometry(0, 1, [1.0, 0.0, 0.0], np.eye(3))
+    solver.update()
+    with pytest.raises(OptionError, match="decide must be True or False"):
+        solver.result(decide="no")  # type: ignore[arg-type]
+    with pytest.raises(OptionError, match="meta must hold only JSON data"):
+        solver.save(tmp_path / "state.npz", meta={"a": object()})
+    assert not (tmp_path / "state.npz").exists()
+    with pytest.raises(OptionError, match="path must be a file path, got int"):
+        OnlineSolver.load(3)  # type: ignore[arg-type]
 
 
 def test_quaternions_that_do_not_normalize_are_refused_when_added():
