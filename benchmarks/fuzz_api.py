@@ -8,7 +8,8 @@ wrong-shaped arrays; and `PoseGraph`s made directly or with `dataclasses.replace
 graph with one array broken (information not positive definite, self-loops, no edges, ids
 unsorted, rows out of range, shapes wrong, a zero quaternion, NaN); and the online solver
 (`egnc.online`) built with junk options, given junk or inconsistent entries, asked for a result,
-a checkpoint or a load with junk arguments. Each must end in an
+a checkpoint or a load with junk arguments, and `egnc.replay.replay` with one junk argument.
+Each must end in an
 `EgncError` (egnc's argument errors, `OptionError`, are `TypeError`s or `ValueError`s too) with
 a one-line message, within `fuzz.TIME_LIMIT_S`; anything else is a bug: a `TypeError` or
 `ValueError` egnc did not raise itself ("foreign error": NumPy's words, naming no argument),
@@ -35,6 +36,7 @@ from egnc.api import marginal_covariances
 from egnc.errors import EgncError
 from egnc.io import read_g2o, read_irl, write_g2o
 from egnc.online import OnlineOptions, OnlineSolver
+from egnc.replay import replay
 
 JUNK: tuple[object, ...] = (
     None, 0, -1, 2.5, float("nan"), True, "", "x", b"bytes", [], [1, 2], {}, {"max_iterations": 5}, (None,),
@@ -112,6 +114,7 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
     """Misuse name -> a function of the random generator making one wrong call."""
     path = fuzz.DATASETS / "grid2d.g2o"
     out = folder / "out.g2o"
+    small = _first_poses(graph, 20)  # a replay needs every pose on an edge
     return {
         "solve: graph": lambda rng: egnc.solve(_junk(rng, not_=(str,))),  # type: ignore[arg-type]
         "solve: options": lambda rng: egnc.solve(graph, options=_junk(rng, not_=(egnc.SolverOptions,))),  # type: ignore[arg-type]
@@ -164,6 +167,19 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
         ),
         "OnlineOptions: field": lambda rng: OnlineOptions(**_bad_online_option(rng)),
         "OnlineSolver: add": lambda rng: rng.choice(_bad_additions())(_online()),
+        "replay: arguments": lambda rng: replay(
+            small,
+            **rng.choice(
+                (
+                    {"known_inliers": rng.choice(("all", [True], np.ones(3), [[0, 1], [2]]))},
+                    {"checkpoint_every": rng.choice((0, 2.5, None, "5", True))},
+                    {"stop_after": rng.choice((-1, 1.5, "3", np.zeros(2)))},
+                    {"checkpoint": rng.choice((3, b"x", [folder], object()))},
+                    {"on_step": rng.choice((1, "print", [print]))},
+                    {"method": rng.choice(("gnc-gm", None, 1))},
+                )
+            ),
+        ),
         "OnlineSolver: result, save, load": lambda rng: rng.choice(
             (
                 lambda solver: solver.result(decide=_junk(rng, not_=(bool,))),
@@ -175,6 +191,19 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
             )
         )(_online()),
     }
+
+
+def _first_poses(graph: egnc.PoseGraph, count: int) -> egnc.PoseGraph:
+    """The graph of the first `count` poses and the edges among them."""
+    keep = (graph.edges < count).all(axis=1)
+    return egnc.PoseGraph(
+        dim=graph.dim,
+        vertex_ids=graph.vertex_ids[:count],
+        poses=graph.poses[:count],
+        edges=graph.edges[keep],
+        measurements=graph.measurements[keep],
+        information=graph.information[keep],
+    )
 
 
 def _online() -> OnlineSolver:

@@ -255,7 +255,10 @@ def known_inlier_mask(graph: PoseGraph, known_inliers: str | np.ndarray) -> np.n
         if known_inliers == "none":
             return np.zeros(graph.num_edges, dtype=bool)
         raise EgncError(f"unknown known_inliers {known_inliers!r}: choose 'odometry', 'none' or an (E,) bool mask")
-    mask = np.asarray(known_inliers)
+    try:
+        mask = np.asarray(known_inliers)
+    except ValueError:  # ragged nesting
+        mask = np.asarray(None)
     if mask.dtype != bool or mask.shape != (graph.num_edges,):
         raise EgncError(f"known_inliers mask must be bool of shape ({graph.num_edges},), got {mask.dtype} {mask.shape}")
     return mask

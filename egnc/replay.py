@@ -20,6 +20,7 @@ uninterrupted run's.
 from __future__ import annotations
 
 import hashlib
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -27,8 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from egnc.api import Result
+from egnc.checks import check_callable, check_instance, check_int
 from egnc.errors import EgncError, GraphError
-from egnc.gnc import GncOptions
+from egnc.gnc import GncOptions, known_inlier_mask
 from egnc.graph import PoseGraph
 from egnc.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
@@ -125,11 +127,14 @@ def replay(
         EgncError: the checkpoint belongs to another graph or other settings.
         GraphError: a step adds a loop closure to a pose no earlier edge reached.
     """
-    known = graph.is_odometry if known_inliers is None else np.asarray(known_inliers, dtype=bool)
-    if known.shape != (graph.num_edges,):
-        raise EgncError(f"known_inliers must be ({graph.num_edges},) bool, got shape {known.shape}")
-    if checkpoint_every < 1:
-        raise EgncError(f"checkpoint_every must be at least 1, got {checkpoint_every}")
+    check_instance("graph", graph, PoseGraph)
+    known = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)
+    check_int("checkpoint_every", checkpoint_every, 1)
+    if stop_after is not None:
+        check_int("stop_after", stop_after, 0)
+    if checkpoint is not None:
+        check_instance("checkpoint", checkpoint, (str, os.PathLike), "a file path")
+    check_callable("on_step", on_step)
     touched = np.zeros(graph.num_poses, dtype=bool)
     touched[graph.edges.ravel()] = True
     if not touched.all():
