@@ -281,8 +281,13 @@ class OnlineSolver:
         online_options: the update protocol (`OnlineOptions`).
 
     Raises:
-        EgncError: an unknown `dim` or method, or an option of the `egnc` schedule
-            (`strong_at_arrival`, `decide_at_arrival`) asked of the `risam` one.
+        OptionError: an unknown `dim`, method or backend, or an options argument of the wrong class.
+        EgncError: an option of the `egnc` schedule (`strong_at_arrival`, `decide_at_arrival`)
+            asked of the `risam` one.
+
+    The `add_*` calls check what they are given (integer ids, finite numbers of the right
+    shape, symmetric positive-definite information, quaternions that normalize, known poses)
+    and raise `GraphError` before taking anything in.
     """
 
     def __init__(
@@ -1091,6 +1096,7 @@ class OnlineSolver:
             meta: JSON-serializable data stored alongside (e.g. how far a replay got).
 
         Raises:
+            OptionError: `path` is not a file path, or `meta` not a dict of JSON data (nothing is written).
             EgncError: entries were added after the last update (update first).
         """
         check_instance("path", path, (str, os.PathLike), "a file path")
@@ -1143,6 +1149,7 @@ class OnlineSolver:
         """Restore a solver written by `save`; returns it and the `meta` saved with it.
 
         Raises:
+            OptionError: `path` is not a file path.
             EgncError: the file is not an egnc checkpoint of this version, or cannot be read.
         """
         check_instance("path", path, (str, os.PathLike), "a file path")
