@@ -344,6 +344,7 @@ class OnlineSolver:
         self._known_ids: set[int] = set()
         self._problem: Problem | None = None
         self._factors: BetweenFactors | None = None
+        self._buffers: dict[str, np.ndarray] = {}  # the arrays _grow appends to, with room to spare
         self._neighbourhoods = Neighbourhoods()  # grown with the edges before each region is drawn
         self._converged: ConvergedMap | None = None  # the map after its last whole-map solve (egnc.arrival)
         self._last_status = -1
@@ -463,7 +464,7 @@ class OnlineSolver:
         new_loops = new_edges[self._robust[new_edges]]
         added = self._current_factors().subset(new_edges)
         new_r = added.whitened_norms(added.residuals(self._T))
-        self._r = np.concatenate((self._r[:num_old_edges], new_r))
+        self._grow("_r", new_r)
         moving = new_edges[new_r > _RESIDUAL_AT_REST]
         # Without edges there is nothing to solve (a prior has moved the map onto itself already).
         needs_solve = len(self._edges) > 0 and (prior_moved or len(new_loops) > 0 or len(moving) > 0)
@@ -524,46 +525,43 @@ class OnlineSolver:
         start = len(self._vertex_ids)
         for vertex_id in pending.pose_ids:
             self._row[vertex_id] = len(self._row)
-        self._vertex_ids = np.concatenate((self._vertex_ids, np.array(pending.pose_ids, dtype=np.int64)))
+        self._grow("_vertex_ids", np.array(pending.pose_ids, dtype=np.int64))
         new_T = np.zeros((len(pending.pose_ids), n, n))
-        placed = np.zeros(len(self._vertex_ids), dtype=bool)
-        placed[:start] = True
+        placed = np.zeros(len(pending.pose_ids), dtype=bool)  # of the new poses; the others are placed
         for k, value in enumerate(pending.pose_values):
             if value is not None:
                 new_T[k] = to_matrices(self.dim, value)
-                placed[start + k] = True
-        self._T = np.concatenate((self._T, new_T))
+                placed[k] = True
+        if start == 0 and len(placed) and not placed[0]:  # the very first pose, placed by nothing: at the identity
+            new_T[0] = np.eye(n)
+            placed[0] = True
         if self._gauge < 0 and len(self._vertex_ids):
             self._gauge = 0
-            if not placed[0]:  # the very first pose, placed by nothing: at the identity
-                self._T[0] = np.eye(n)
-                placed[0] = True
         Z = to_matrices(self.dim, np.array(pending.measurements).reshape(-1, POSE_SIZE[self.dim]))
         rows = np.array([[self._row[i], self._row[j]] for i, j in pending.edge_ids], dtype=np.int64).reshape(-1, 2)
         robust = np.array(pending.robust, dtype=bool)
         for (i, j), Z_ij, is_loop in zip(rows.tolist(), Z, robust.tolist()):
-            if is_loop or placed[i] == placed[j]:
+            placed_i, placed_j = i < start or placed[i - start], j < start or placed[j - start]
+            if is_loop or placed_i == placed_j:
                 continue
-            if placed[i]:
-                self._T[j] = self._T[i] @ Z_ij
-                placed[j] = True
+            if placed_i:
+                new_T[j - start] = (self._T[i] if i < start else new_T[i - start]) @ Z_ij
+                placed[j - start] = True
             else:
-                self._T[i] = self._T[j] @ self._group.inverse(Z_ij)
-                placed[i] = True
+                new_T[i - start] = (self._T[j] if j < start else new_T[j - start]) @ self._group.inverse(Z_ij)
+                placed[i - start] = True
         if not placed.all():
-            unplaced = self._vertex_ids[~placed][:5].tolist()
+            unplaced = self._vertex_ids[start:][~placed][:5].tolist()
             raise GraphError(f"poses {unplaced} have no value and no odometry from a placed pose")
-        self._T_initial = np.concatenate((self._T_initial, self._T[start:]))
-        self._edges = np.concatenate((self._edges, rows))
-        measurements = np.array(pending.measurements).reshape(len(rows), POSE_SIZE[self.dim])
-        self._measurements = np.concatenate((self._measurements, measurements))
-        self._Z_inv = np.concatenate((self._Z_inv, self._group.inverse(Z)))
-        self._information = np.concatenate(
-            (self._information, np.array(pending.information).reshape(len(rows), self._d, self._d))
-        )
-        self._robust = np.concatenate((self._robust, robust))
-        self._mu = np.concatenate((self._mu, np.zeros(len(rows))))
-        self._mu_init = np.concatenate((self._mu_init, np.zeros(len(rows))))
+        self._grow("_T", new_T)
+        self._grow("_T_initial", new_T)
+        self._grow("_edges", rows)
+        self._grow("_measurements", np.array(pending.measurements).reshape(len(rows), POSE_SIZE[self.dim]))
+        self._grow("_Z_inv", self._group.inverse(Z))
+        self._grow("_information", np.array(pending.information).reshape(len(rows), self._d, self._d))
+        self._grow("_robust", robust)
+        self._grow("_mu", np.zeros(len(rows)))
+        self._grow("_mu_init", np.zeros(len(rows)))
         if len(rows) or len(pending.pose_ids):
             self._problem = self._factors = None
         if pending.prior is None:
@@ -575,6 +573,26 @@ class OnlineSolver:
         self._gauge, self._has_prior = row, True
         self._problem = None
         return True
+
+    def _grow(self, name: str, rows: np.ndarray) -> None:
+        """Append `rows` to the array attribute `name` in time that follows `rows`: the array is
+        kept as the first rows of a buffer with an eighth of room to spare (a new buffer when
+        full: amortized, each row is copied at most nine times). An attribute a solve has replaced
+        by another array is copied into a new buffer first."""
+        current = getattr(self, name)
+        size, grown = len(current), len(current) + len(rows)
+        buffer = self._buffers.get(name)
+        if (
+            buffer is None
+            or current.base is not buffer
+            or current.ctypes.data != buffer.ctypes.data  # not a prefix of its buffer
+            or grown > len(buffer)
+        ):
+            buffer = np.empty((grown + max(16, grown // 8), *current.shape[1:]), dtype=current.dtype)
+            buffer[:size] = current
+            self._buffers[name] = buffer
+        buffer[size:grown] = rows
+        setattr(self, name, buffer[:grown])
 
     def _current_factors(self) -> BetweenFactors:
         if self._factors is None:

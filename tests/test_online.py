@@ -486,6 +486,27 @@ def test_inputs_are_checked():
         OnlineOptions(rel_cost_tol=1.0)
 
 
+def test_odometry_updates_append_to_the_map_in_place():
+    # An update that only extends the trajectory writes its rows into room kept at the end of
+    # each array: the map is not copied, so its cost does not grow with the map.
+    solver, information = _chain("egnc")
+    buffers = set()
+    for k in range(10, 400):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.001], information)
+        assert solver.update().iterations == 0
+        buffers.add(solver._T.__array_interface__["data"][0])
+        assert np.shares_memory(solver._edges, solver._buffers["_edges"])
+    # 390 updates, arrays grown by an eighth when full: a new buffer every few dozen updates.
+    assert len(buffers) <= 30
+    # The poses are those of the composed odometry: pose k turned 0.001 rad per step after pose 10.
+    np.testing.assert_allclose(solver.poses[10:, 2], 0.001 * np.arange(391), atol=1e-12)
+    # A loop closure after them still solves, and fits.
+    T = to_matrices(2, solver.poses)
+    measurement = from_matrices(2, (np.linalg.inv(T[400]) @ T[395])[None])[0] + [0.01, 0.0, 0.0]
+    solver.add_loop(400, 395, measurement, information)
+    assert solver.update().iterations > 0 and not len(solver.rejected)
+
+
 def test_options_and_arguments_of_the_wrong_kind_fail_at_once_naming_them(tmp_path):
     with pytest.raises(OptionError, match=r"OnlineOptions.region_hops must be an integer, got 2.5"):
         OnlineOptions(region_hops=2.5)  # type: ignore[arg-type]
