@@ -22,7 +22,8 @@ def test_a_row_per_size_with_loops_solved_in_a_region():
         timeout=600,
     )
     assert done.returncode == 0, done.stderr
-    rows = [line.strip("|").split("|") for line in done.stdout.splitlines() if line.startswith("| ") and line[2].isdigit()]
+    lines = done.stdout.splitlines()
+    rows = [line.strip("|").split("|") for line in lines if line.startswith("| ") and line[2].isdigit()]
     assert [int(row[0]) for row in rows] == [200, 2000]
     for _, odometry, loop, region in rows:
         odometry_p50, odometry_max = map(float, odometry.split(" / "))
