@@ -577,8 +577,8 @@ class OnlineSolver:
     def _grow(self, name: str, rows: np.ndarray) -> None:
         """Append `rows` to the array attribute `name` in time that follows `rows`: the array is
         kept as the first rows of a buffer with an eighth of room to spare (a new buffer when
-        full: amortized, each row is copied at most nine times). An attribute a solve has replaced
-        by another array is copied into a new buffer first."""
+        full: about nine copies per row on average). An attribute a solve has replaced by another
+        array is copied into a new buffer first."""
         current = getattr(self, name)
         size, grown = len(current), len(current) + len(rows)
         buffer = self._buffers.get(name)
