@@ -51,6 +51,11 @@ and already checked, they are shared by the graphs derived from one another (`wi
 `dataclasses.replace`) instead of being copied and checked again."""
 
 
+def is_dim(value: object) -> bool:
+    """Whether `value` is the integer 2 or 3 (NumPy integers too; bools and floats are not)."""
+    return not isinstance(value, (bool, np.bool_)) and isinstance(value, (int, np.integer)) and value in POSE_SIZE
+
+
 def _private_copy(name: str, value: object, dtype: type) -> np.ndarray:
     """A read-only view of a new copy of `value` as `dtype`: its base is not the caller's array.
 
@@ -114,7 +119,7 @@ class PoseGraph:
     unknown_lines: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if isinstance(self.dim, bool) or not isinstance(self.dim, (int, np.integer)) or self.dim not in POSE_SIZE:
+        if not is_dim(self.dim):
             raise GraphError(f"dim must be 2 or 3, got {describe(self.dim)}")
         object.__setattr__(self, "dim", int(self.dim))
         p, d = POSE_SIZE[self.dim], TANGENT_SIZE[self.dim]

@@ -81,7 +81,7 @@ from egnc.decision import decide_outliers
 from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
 from egnc.gnc import GncOptions, StageReport, classify_inliers
-from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph, is_dim
 from egnc.io.atomic import atomic_binary_file
 from egnc.kernels import make_kernel
 from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, SolverOptions, solve_least_squares
@@ -300,7 +300,7 @@ class OnlineSolver:
         gnc_options: GncOptions | None = None,
         online_options: OnlineOptions | None = None,
     ):
-        if isinstance(dim, (bool, np.bool_)) or not isinstance(dim, (int, np.integer)) or dim not in POSE_SIZE:
+        if not is_dim(dim):
             raise OptionError(f"dim must be 2 or 3, got {describe(dim)}")
         check_choice("online method", method, ONLINE_METHODS)
         for name, value, kind in (
@@ -376,10 +376,7 @@ class OnlineSolver:
         if self._has_prior or self._pending.prior is not None:
             raise GraphError("a second prior: the online solver uses one prior as the gauge")
         value = self._poses_array(_one(pose), 1, "prior pose")[0]
-        ids = _ids(vertex_id, 1)
-        if len(ids) != 1:
-            raise GraphError(f"add_prior takes one vertex id, got {len(ids)}")
-        vertex_id = int(ids[0])
+        vertex_id = _vertex_id(vertex_id)
         if vertex_id not in self._known_ids:
             self.add_pose(vertex_id, value)
         self._pending.prior = (vertex_id, value)
@@ -1206,12 +1203,16 @@ class OnlineSolver:
         return solver, settings["meta"]
 
 
+def _vertex_id(value: object) -> int:
+    """One vertex id as an int; it must be an integer (bools refused; the range is `_ids`'s to check)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise GraphError(f"vertex ids must be integers, got {describe(value)}")
+    return int(value)
+
+
 def _pair(i: int, j: int) -> ArrayLike:
-    """The ids of one edge as a one-row batch for `_ids`; each must be one integer."""
-    for vertex_id in (i, j):
-        if isinstance(vertex_id, (bool, np.bool_)) or not isinstance(vertex_id, (int, np.integer)):
-            raise GraphError(f"vertex ids must be integers, got {describe(vertex_id)}")
-    return [[int(i), int(j)]]
+    """The ids of one edge as a one-row batch for `_ids`."""
+    return [[_vertex_id(i), _vertex_id(j)]]
 
 
 def _one(value: object) -> ArrayLike:
