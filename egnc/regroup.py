@@ -80,15 +80,17 @@ def consistent_pairs(loops: BetweenFactors, poses: np.ndarray, pairs: np.ndarray
     i = np.where(flip, loops.edges[:, 1], loops.edges[:, 0])
     j = np.where(flip, loops.edges[:, 0], loops.edges[:, 1])
     Z_inv = np.where(flip[:, None, None], group.inverse(loops.Z_inv), loops.Z_inv)  # oriented i -> j
+    Z = group.inverse(Z_inv)  # once per loop: a loop is in many pairs
     first, second = pairs[:, 0], pairs[:, 1]
     cycle = (
         Z_inv[first]
         @ group.between(poses[i[first]], poses[i[second]])
-        @ group.inverse(Z_inv[second])
+        @ Z[second]
         @ group.between(poses[j[second]], poses[j[first]])
     )
     e = group.log(cycle)
-    covariance = np.linalg.inv(loops.information[first]) + np.linalg.inv(loops.information[second])
+    own = np.linalg.inv(loops.information)
+    covariance = own[first] + own[second]
     statistics = np.einsum("pi,pi->p", e, np.linalg.solve(covariance, e[:, :, None])[:, :, 0])
     return statistics <= threshold
 
