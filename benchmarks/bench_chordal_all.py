@@ -30,16 +30,14 @@ from egnc.bench.cases import least_squares_optimum
 from egnc.datasets import add_false_loops
 from egnc.decision import truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions
+from egnc.gnc import START_OPTIONS, GncOptions
 from egnc.graph import PoseGraph
 from egnc.metrics import precision_recall
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_drifted import DEFAULT_DATA, DRIFTED, SHARED, cases, load  # noqa: E402
 
-GUESS_ONLY_FROM_CHORDAL = GncOptions(
-    chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
-)
+GUESS_ONLY_FROM_CHORDAL = GncOptions(**dict.fromkeys(START_OPTIONS, False))
 CORRUPTED = (
     "MIT,tinyGrid3D,smallGrid3D,csail,intel,kitti_00,manhattanOlson3500,sphere2500,city10000,parking-garage,"
     "sphere_a,cubicle"

@@ -10,9 +10,10 @@ deviation), this prints the loop closures each method rejects and the least-squa
 reaches, relative to the least-squares optimum (the lower of `l2` from the guess and from the
 chordal initialization):
 
-- `egnc`: the default (`egnc.solve`), with its other starts (`GncOptions.chordal_start`,
-  `chordal_all_start`, `regroup_start`, `elimination_start`);
-- `guess only`: the default before them (all four off);
+- `egnc`: the default (`egnc.solve`), with its other starts (`egnc.gnc.START_OPTIONS`:
+  `GncOptions.runs_start`, `chordal_start`, `chordal_all_start`, `regroup_start`,
+  `elimination_start`);
+- `guess only`: the default before them (all off);
 - `gtsam-gnc-tls`: GTSAM's GncLMOptimizer (TLS, known inliers = odometry), rejected = loops whose
   `r^2 > chi2.ppf(0.99, d)` at its solution (its own inlier rule); `gtsam-lm`: GTSAM's LM from the
   same guess, over every edge.
@@ -34,7 +35,7 @@ from egnc.bench.child import Outcome, run_in_child
 from egnc.bench.gtsam import gtsam_available, gtsam_solve
 from egnc.datasets import grid_world
 from egnc.factors import BetweenFactors, from_matrices, to_matrices
-from egnc.gnc import GncOptions
+from egnc.gnc import START_OPTIONS, GncOptions
 from egnc.graph import PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.kernels import chi2_quantile
@@ -76,8 +77,7 @@ def drifted(graph: PoseGraph, kind: str, level: float, seed: int) -> PoseGraph:
 
 def solve_egnc(graph: PoseGraph, method: str, init: str, other_starts: bool) -> dict:
     """One egnc solve (child process): rejected loops, all-edge cost, start, time, warnings."""
-    names = ("chordal_start", "chordal_all_start", "regroup_start", "elimination_start")
-    starts = {name: other_starts for name in names}
+    starts = dict.fromkeys(START_OPTIONS, other_starts)
     result = egnc.solve(graph, method, init=init, gnc_options=GncOptions(**starts))
     return {
         "rejected": len(result.rejected_edges),

@@ -89,7 +89,7 @@ def run_robust(case: dict) -> dict:
     import egnc.step_solver
     from egnc.api import solve
     from egnc.datasets import add_false_loops
-    from egnc.gnc import GncOptions
+    from egnc.gnc import START_OPTIONS, GncOptions
     from egnc.least_squares import SolverOptions
     from egnc.metrics import ate, precision_recall
 
@@ -125,9 +125,7 @@ def run_robust(case: dict) -> dict:
         "ate": ate(robust.graph.poses[: graph.num_poses], reference_poses, graph.dim),
     }
     direct = SolverOptions(linear_method="direct")
-    guess_only = GncOptions(
-        chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
-    )
+    guess_only = GncOptions(**dict.fromkeys(START_OPTIONS, False))
     variants = {"direct": (direct, GncOptions()), "before": (SolverOptions(), guess_only)}
     for name in ("direct", "before"):
         if case[name]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -13,7 +14,7 @@ import numpy as np
 
 from egnc.checks import check_callable, check_choice, check_instance
 from egnc.chordal import chordal_initialization
-from egnc.decision import StartContext, decide_outliers, truncated_cost
+from egnc.decision import Decision, StartContext, truncated_cost
 from egnc.diagnostics import solve_warnings
 from egnc.elimination import elimination_decision
 from egnc.errors import EgncError, GraphError, OptionError
@@ -44,7 +45,7 @@ from egnc.least_squares import (
 )
 from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
-from egnc.regroup import regrouped_decision
+from egnc.regroup import regrouped_decision, runs_start
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
 from egnc.starts import all_edges_decision, chordal_decision
 
@@ -54,12 +55,14 @@ INITIALIZATIONS = ("file", "odometry", "chordal")
 """Initial guesses `egnc.solve(init=...)` and `egnc-solve --init` accept (see `initial_guess`)."""
 
 _START_NAMES = {
+    "guess": "initial guess",
+    "runs": "GNC stage from the chordal map of the loop closures in runs",
     "chordal": "chordal initialization",
     "chordal-all": "GNC stage run again from the chordal initialization of every edge",
     "regrouped": "rejected runs of loop closures put back together",
     "elimination": "backward elimination over every edge",
 }
-"""How the message names a start other than the guess whose decision was kept."""
+"""How the message names the start whose decision was kept, and the first start it was compared with."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,9 +103,11 @@ class Result:
             With `residual_norms` it explains a rejection: a loop far off at both is false.
         init: the initial guess used (`INITIALIZATIONS`).
         start: where the decision that was kept started: `"guess"` (the GNC solve from `init`),
-            `"chordal"` (the chordal initialization, kept for its lower truncated cost;
-            `GncOptions.chordal_start`), `"chordal-all"` (the GNC stage run again from the chordal
-            initialization of every edge; `GncOptions.chordal_all_start`), `"regrouped"`
+            `"runs"` (the GNC solve from the chordal map of the loops in runs, where that fits
+            better than `init`; `GncOptions.runs_start`), `"chordal"` (the chordal
+            initialization, kept for its lower truncated cost; `GncOptions.chordal_start`),
+            `"chordal-all"` (the GNC stage run again from the chordal initialization of every
+            edge; `GncOptions.chordal_all_start`), `"regrouped"`
             (rejected runs of loops put back together; `GncOptions.regroup_start`),
             `"elimination"` (backward elimination from least squares over every edge;
             `GncOptions.elimination_start`) or `"online"` (`egnc.online.OnlineSolver`'s estimate).
@@ -361,21 +366,30 @@ def solve(
             start=start,
         )
 
-    outcome = graduate(initial)
+    context = StartContext(graph, robust, factors, options, gnc_options, backend, on_stage, on_iteration)
+    runs = runs_start(context, initial) if refine and gnc_options.runs_start else None
+    first: StageStart = "guess" if runs is None else "runs"
+    outcome = graduate(initial if runs is None else runs.poses, first)
     poses, stages = outcome.poses, outcome.stages
     status, message = outcome.status, outcome.message
     robust_r = factors.whitened_norms(factors.residuals(poses))
     decide = refine and status != NUMERICAL_FAILURE  # nothing to decide on a failed solve
-    start, settled, message_note = "guess", True, ""
+    start: str = first
+    settled, message_note = True, ""
     disputed: np.ndarray | None = None
     if decide:
-        decision = decide_outliers(graph, poses, robust, options, gnc_options, backend, factors, on_stage, on_iteration)
+        decision = context.decide(poses, classify_inliers(robust_r, robust, graph.tangent_dim, gnc_options), first)
         stages += decision.reports
-        candidates = {"guess": decision}
-        context = StartContext(graph, robust, factors, options, gnc_options, backend, on_stage, on_iteration)
+        candidates: dict[str, Decision] = {first: decision}
+        if runs is not None and runs.contradicted(decision.inliers):  # the runs' map may be bent
+            other, reports = _decision_from_guess(context, initial, graduate)
+            stages += reports
+            if other is not None:
+                candidates["guess"] = other
         if gnc_options.chordal_start:
             trusted = ~robust | (outcome.weights >= options.trust_weight)
-            other, reports = chordal_decision(context, decision, trusted)
+            best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
+            other, reports = chordal_decision(context, best, trusted)
             stages += reports
             if other is not None:
                 candidates["chordal"] = other
@@ -391,16 +405,17 @@ def solve(
                 stages += reports
                 if other is not None:
                     candidates[name] = other
-        start = "guess"
         for name, candidate in candidates.items():  # a later start must be lower by more than rounding
             if candidate.truncated_cost < candidates[start].truncated_cost * (1 - 1e-9):
                 start = name
         decision = candidates[start]
-        if start != "guess":
+        if start != first:
             message_note = (
                 f"; decision from the {_START_NAMES[start]} (truncated cost {decision.truncated_cost:.6g},"
-                f" against {candidates['guess'].truncated_cost:.6g} from the initial guess)"
+                f" against {candidates[first].truncated_cost:.6g} from the {_START_NAMES[first]})"
             )
+        elif first != "guess":
+            message_note = f"; decision from the {_START_NAMES[first]}"
         if len(candidates) > 1:
             accepted_elsewhere = np.logical_or.reduce([c.inliers for name, c in candidates.items() if name != start])
             disputed = robust & ~decision.inliers & accepted_elsewhere
@@ -444,6 +459,23 @@ def solve(
             disputed=disputed,
         ),
     )
+
+
+def _decision_from_guess(
+    context: StartContext, initial: np.ndarray, graduate: Callable[[np.ndarray, StageStart], GncOutcome]
+) -> tuple[Decision | None, tuple[StageReport, ...]]:
+    """The GNC stage from the initial guess `(N, n, n)` and its decision, labelled `"guess"`.
+
+    Runs where the GNC stage started from the loops in runs and its decision rejected a run
+    (`egnc.regroup.RunsStart.contradicted`); None where the stage fails numerically.
+    """
+    outcome = graduate(initial, "guess")
+    if outcome.status == NUMERICAL_FAILURE:
+        return None, outcome.stages
+    r = context.factors.whitened_norms(context.factors.residuals(outcome.poses))
+    inliers = classify_inliers(r, context.robust, context.graph.tangent_dim, context.gnc_options)
+    decision = context.decide(outcome.poses, inliers, "guess")
+    return decision, (*outcome.stages, *decision.reports)
 
 
 def _nothing_to_optimize(

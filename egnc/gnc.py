@@ -32,6 +32,10 @@ from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, So
 from egnc.losses import FixedWeightLoss, KernelLoss
 from egnc.schedules import FIXED_LAST_STAGE_METHODS, Schedule, Stage, ThresholdConvention, exceeds
 
+START_OPTIONS = ("runs_start", "chordal_start", "chordal_all_start", "regroup_start", "elimination_start")
+"""The `GncOptions` fields that switch the starts other than the initial guess; all False gives
+the decision from the GNC stage of the initial guess alone (`GncOptions(**dict.fromkeys(START_OPTIONS, False))`)."""
+
 
 @dataclass(frozen=True)
 class GncOptions:
@@ -82,6 +86,13 @@ class GncOptions:
             only through the next stage's loss, and egnc's and riSAM's last stage puts every
             loop at `mu = 1` whatever came before: only that stage is solved (the same poses
             and decision as solving every stage, bit for bit; docs/method.md).
+        runs_start: with `refine`, start the GNC stage from the chordal initialization of the
+            known inliers and the loop closures that come in runs agreeing with each other
+            (`egnc.regroup.runs_start`) instead of the initial guess, where that map has the
+            lower truncated least-squares cost: it reads the guess only between poses a few
+            rows apart, so a drifted guess does not decide which basin the stage settles in.
+            Where that start's decision rejects a whole run, the GNC stage also runs from the
+            guess, and the decision of lower truncated cost is kept.
         chordal_start: with `refine`, decide a second time from the chordal initialization
             (which does not read the initial guess) and keep the decision of lower truncated
             least-squares cost (`egnc.starts`): from a drifted guess the GNC stage can settle in a
@@ -122,6 +133,7 @@ class GncOptions:
     readmit_quantile: float = 0.9999
     readmit_false_alarms: float | None = 1.0
     warm_start: bool = False
+    runs_start: bool = True
     chordal_start: bool = True
     chordal_all_start: bool = True
     regroup_start: bool = True
@@ -146,8 +158,7 @@ class GncOptions:
         for name in ("outlier_quantile", "readmit_quantile"):
             value = getattr(self, name)
             checked[name] = check_float(f"GncOptions.{name}", value, 0.0, 1.0, open_low=True, open_high=True)
-        starts = ("chordal_start", "chordal_all_start", "regroup_start", "elimination_start")
-        for name in ("refine", "readmit", "warm_start", *starts, "every_stage"):
+        for name in ("refine", "readmit", "warm_start", *START_OPTIONS, "every_stage"):
             checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
         for name, value in checked.items():
             object.__setattr__(self, name, value)
@@ -173,7 +184,7 @@ def stage_tolerance(method: str, options: GncOptions) -> float:
 
 
 StageKind = Literal["gnc", "decision", "probe", "elimination"]
-StageStart = Literal["guess", "chordal", "chordal-all", "regrouped", "elimination", "online"]
+StageStart = Literal["guess", "runs", "chordal", "chordal-all", "regrouped", "elimination", "online"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,10 +204,11 @@ class StageReport:
             `egnc.decision`), `"probe"` (the few iterations `egnc.starts` gives the chordal
             start; it stops at its iteration limit by design) or `"elimination"` (a least-squares
             solve of `egnc.elimination`'s backward elimination).
-        start: the start the stage belongs to: `"guess"`, `"chordal"` or `"chordal-all"`
-            (`egnc.starts`), `"regrouped"` (`egnc.regroup`), `"elimination"` (`egnc.elimination`) or
-            `"online"` (the estimate of `egnc.online.OnlineSolver`); only the stages of the
-            start that was kept (`Result.start`) shape the result.
+        start: the start the stage belongs to: `"guess"`, `"runs"` (the GNC stage from the
+            chordal map of the loops in runs, `egnc.regroup.runs_start`), `"chordal"` or
+            `"chordal-all"` (`egnc.starts`), `"regrouped"` (`egnc.regroup`), `"elimination"`
+            (`egnc.elimination`) or `"online"` (the estimate of `egnc.online.OnlineSolver`);
+            only the stages of the start that was kept (`Result.start`) shape the result.
     """
 
     mu_min: float

@@ -16,7 +16,7 @@ from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import MAX_ROUNDS, decide_outliers, readmit_quantile, sequentially_consistent, truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions
+from egnc.gnc import START_OPTIONS, GncOptions
 from egnc.graph import PoseGraph
 from egnc.io import read_irl
 from egnc.kernels import chi2_quantile
@@ -24,7 +24,7 @@ from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available
 from egnc.marginals import innovations, pose_covariances, relative_covariances
 
-GUESS_ONLY = GncOptions(chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False)
+GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
 """The decision from the initial guess alone."""
 
 OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, chordal_start=False, elimination_start=False)
@@ -221,9 +221,14 @@ def test_a_corrupted_odometry_edge_is_reported_not_hidden():
     assert len(result.stages) <= 3 + MAX_ROUNDS
     # From the chordal start the odometry is honoured, kilometre and all, and the loops across
     # the glitch are rejected: the lower truncated cost with the odometry a known inlier, and
-    # the message says which start the decision came from.
-    result = solve(corrupted)
+    # the message says which start the decision came from. The GNC stage from the chordal map
+    # of the loops in runs (the default) reaches the same decision.
+    first = solve(corrupted)
+    result = solve(corrupted, gnc_options=GncOptions(runs_start=False))
     assert result.start == "chordal" and "chordal initialization" in result.message
+    assert first.start == "runs" and "loop closures in runs" in first.message
+    np.testing.assert_array_equal(first.inliers, result.inliers)
+    assert first.truncated_cost == pytest.approx(result.truncated_cost, rel=1e-9)
     assert result.residual_norms[k] < 1.0 and 0 < len(result.rejected_edges) < 0.1 * graph.is_loop_closure.sum()
     # The elimination start cannot beat it and stops at its step bound (egnc.elimination).
     steps = [stage.kind for stage in result.stages].count("elimination")

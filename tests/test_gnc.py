@@ -80,8 +80,9 @@ def test_result_reports_per_edge_diagnostics(corrupted_world):
     assert np.all((result.weights >= 0) & (result.weights <= 1))
     np.testing.assert_array_equal(result.rejected_edges, np.flatnonzero(corrupted.is_outlier))
     # Restarted stages: only the last (mu = 1) is solved, then the least-squares refinement.
-    # the GNC stage, one decision round, and the chordal start's probe (its classification differs)
-    assert [stage.kind for stage in result.stages][:2] == ["gnc", "decision"] and result.start == "guess"
+    # The GNC stage and one decision round (the start kept is the GNC stage's own), then the
+    # chordal start's probe.
+    assert [stage.kind for stage in result.stages][:2] == ["gnc", "decision"] and result.start == result.stages[0].start
     assert result.stages[0].mu_min == 1.0 and np.isnan(result.stages[1].mu_min)
 
 

@@ -55,6 +55,7 @@ BAD_GNC_OPTIONS = [
     ("chordal_all_start", 0),
     ("elimination_start", 1),
     ("regroup_start", "on"),
+    ("runs_start", 1),
     ("refine", None),
     ("readmit", "yes"),
     ("every_stage", 1.0),

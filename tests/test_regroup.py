@@ -4,15 +4,27 @@ from __future__ import annotations
 
 import numpy as np
 
+import egnc
 from egnc.api import solve
+from egnc.bench.cases import least_squares_optimum
+from egnc.chordal import chordal_initialization
 from egnc.connectivity import connected_components
 from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import Decision, StartContext, truncated_cost
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions
+from egnc.graph import PoseGraph
 from egnc.kernels import chi2_quantile
 from egnc.least_squares import SolverOptions
-from egnc.regroup import MIN_RUN, consistent_pairs, loop_runs, neighbouring_pairs, regrouped_decision
+from egnc.regroup import (
+    MIN_RUN,
+    RunsStart,
+    consistent_pairs,
+    loop_runs,
+    neighbouring_pairs,
+    regrouped_decision,
+    runs_start,
+)
 
 
 def test_neighbouring_pairs_link_loops_whose_both_ends_are_near():
@@ -99,3 +111,79 @@ def test_false_loops_side_by_side_by_chance_are_not_a_run():
     without = solve(corrupted.graph, gnc_options=GncOptions(regroup_start=False))
     np.testing.assert_array_equal(result.inliers, without.inliers)
     assert np.count_nonzero(result.inliers[corrupted.is_outlier]) == 0
+
+
+def _context(graph: PoseGraph) -> StartContext:
+    """The start context of `graph` with its odometry known inliers, default options, SciPy."""
+    factors = BetweenFactors.from_graph(graph)
+    return StartContext(graph, ~graph.is_odometry, factors, SolverOptions(), GncOptions(), "scipy")
+
+
+def test_the_gnc_stage_starts_from_the_chordal_map_of_the_loops_in_runs():
+    # 30 % false loops on a grid whose guess is chained odometry: the runs at the guess hold true
+    # loops only, their chordal map fits better than the guess, and the GNC stage starts there.
+    world = grid_world(2, 2000, seed=1)
+    reference = solve(world.graph, "l2", init="chordal").graph.poses
+    corrupted = add_false_loops(world.graph, 30, seed=2, reference_poses=reference)
+    graph = corrupted.graph
+    context = _context(graph)
+    guess = to_matrices(2, graph.poses)
+    start = runs_start(context, guess)
+    loops = np.flatnonzero(context.robust)
+    labels = loop_runs(context.factors.subset(loops), guess, chi2_quantile(0.9999, 3))
+    in_run = loops[np.bincount(labels)[labels] >= MIN_RUN]
+    assert len(in_run) > 100 and not corrupted.is_outlier[in_run].any()
+    keep = graph.is_odometry.copy()
+    keep[in_run] = True
+    expected = chordal_initialization(graph.subgraph_edges(keep), linear_solver="scipy")
+    assert start is not None
+    np.testing.assert_array_equal(start.poses, to_matrices(2, expected))
+    np.testing.assert_array_equal(np.flatnonzero(start.runs >= 0), np.sort(in_run))
+
+    def cost(poses: np.ndarray) -> float:
+        return truncated_cost(context.factors.whitened_norms(context.factors.residuals(poses)), context.robust, 3, 0.99)
+
+    assert cost(start.poses) < cost(guess)
+    result = solve(graph)
+    assert result.start == "runs" and result.stages[0].kind == "gnc" and result.stages[0].start == "runs"
+    np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
+
+
+def test_a_guess_without_runs_or_better_than_their_map_is_kept(dataset_path):
+    # MIT's 20 loops form no run: nothing changes, bit for bit.
+    mit = egnc.read_g2o(dataset_path("MIT.g2o"))
+    assert runs_start(_context(mit), to_matrices(2, mit.poses)) is None
+    result, without = solve(mit), solve(mit, gnc_options=GncOptions(runs_start=False))
+    assert result.start == without.start == "guess" and result.stages[0].start == "guess"
+    np.testing.assert_array_equal(result.graph.poses, without.graph.poses)
+    # A grid whose guess is its least-squares optimum has runs, but no map of fewer edges fits better.
+    grid = grid_world(2, 600, seed=3).graph
+    optimum = solve(grid, "l2").graph
+    assert runs_start(_context(optimum), to_matrices(2, optimum.poses)) is None
+    assert solve(optimum).start == "guess"
+
+
+def test_a_run_rejected_whole_contradicts_the_start():
+    runs = np.array([-1, 0, 0, 0, 1, 1, 1, -1])
+    start = RunsStart(np.eye(3)[None], runs)
+    inliers = np.ones(8, dtype=bool)
+    assert not start.contradicted(inliers)
+    inliers[[0, 7]] = False  # loops outside the runs
+    inliers[[1, 4, 5]] = False  # one or two loops of each run: honest false alarms
+    assert not start.contradicted(inliers)
+    inliers[6] = False  # all of run 1
+    assert start.contradicted(inliers)
+
+
+def test_runs_of_false_loops_send_the_decision_back_to_the_guess(dataset_path):
+    # riSAM's "group" variant: false loops drawn in groups that agree with each other form runs,
+    # and their chordal map is bent. Its decision rejects whole runs it had assumed true, so the
+    # GNC stage runs from the guess as well, and that decision (every false loop out, nothing
+    # else) has the lower truncated cost.
+    graph = egnc.read_g2o(dataset_path("manhattanOlson3500.g2o"))
+    reference = least_squares_optimum(graph, "auto").graph.poses
+    corrupted = add_false_loops(graph, 10, seed=1, reference_poses=reference, variant="group")
+    result = solve(corrupted.graph)
+    assert [stage.start for stage in result.stages if stage.kind == "gnc"] == ["runs", "guess"]
+    assert result.start == "guess" and "from the initial guess" in result.message
+    np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)

@@ -14,7 +14,7 @@ from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import Decision, StartContext, truncated_cost
 from egnc.diagnostics import solve_warnings
 from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions, StageStart, run_gnc
+from egnc.gnc import START_OPTIONS, GncOptions, StageStart, run_gnc
 from egnc.graph import PoseGraph
 from egnc.initialize import initialize_poses
 from egnc.kernels import chi2_quantile
@@ -23,9 +23,7 @@ from egnc.marginals import pose_covariances
 from egnc.schedules import make_schedule
 from egnc.starts import ALL_EDGES_SHARE, all_edges_decision
 
-GUESS_ONLY = GncOptions(
-    chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
-)
+GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
 """The default before the chordal start: decide from the GNC solve of the initial guess alone."""
 
 
@@ -52,24 +50,31 @@ def test_a_drifted_guess_no_longer_decides_the_result(dataset_path):
     graph = drifted_guess(egnc.read_g2o(dataset_path("manhattanOlson3500.g2o")), seed=2, heading_sigma=0.1)
     guess_only = solve(graph, gnc_options=GUESS_ONLY)
     result = solve(graph)
+    chordal = solve(graph, gnc_options=GncOptions(runs_start=False))
     least_squares = solve(graph, "l2", init="chordal")
-    assert result.start == "chordal" and "chordal initialization" in result.message
-    assert len(guess_only.rejected_edges) > 100 and len(result.rejected_edges) == 0
-    assert result.truncated_cost < guess_only.truncated_cost
-    assert result.cost == pytest.approx(least_squares.cost, rel=1e-6)  # the least-squares optimum
+    assert len(guess_only.rejected_edges) > 100
+    # The GNC stage starts from the chordal map of the loops in runs; without that start, the
+    # chordal start's decision wins.
+    assert result.start == "runs" and "loop closures in runs" in result.message
+    assert chordal.start == "chordal" and "chordal initialization" in chordal.message
+    for decided in (result, chordal):
+        assert len(decided.rejected_edges) == 0 and decided.truncated_cost < guess_only.truncated_cost
+        assert decided.cost == pytest.approx(least_squares.cost, rel=1e-6)  # the least-squares optimum
 
 
-def test_false_loops_keep_the_decision_of_the_guess():
+def test_false_loops_keep_the_decision_of_the_first_start():
     world = grid_world(2, 300, seed=3, noise_scale=0.3)
     clean = solve(world.graph, "l2")
     corrupted = add_false_loops(world.graph, 30, seed=4, reference_poses=clean.graph.poses)
-    result = solve(corrupted.graph)
-    np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
-    assert result.start == "guess"
-    # the chordal start ran (its map fits other loops) but was not adopted
-    assert [stage.kind for stage in result.stages].count("probe") == 1
-    guess_only = solve(corrupted.graph, gnc_options=GUESS_ONLY)
-    np.testing.assert_array_equal(result.graph.poses, guess_only.graph.poses)
+    for first in ("runs", "guess"):
+        options = GncOptions(runs_start=first == "runs")
+        result = solve(corrupted.graph, gnc_options=options)
+        np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
+        assert result.start == first
+        # the chordal start ran (its map fits other loops) but was not adopted
+        assert [stage.kind for stage in result.stages].count("probe") == 1
+        first_only = dataclasses.replace(GUESS_ONLY, runs_start=options.runs_start)
+        np.testing.assert_array_equal(result.graph.poses, solve(corrupted.graph, gnc_options=first_only).graph.poses)
 
 
 def test_least_squares_rejects_nothing_and_its_covariances_use_every_edge():
@@ -89,9 +94,11 @@ def test_manhattan_with_a_noisy_heading_keeps_every_loop(dataset_path):
     # The guess-only default folded this map and rejected true loops; the least-squares optimum
     # from the chordal guess keeps them all.
     graph = drifted_guess(egnc.read_g2o(dataset_path("manhattanOlson3500.g2o")), seed=1, heading_sigma=0.3)
-    result = solve(graph)
-    assert len(result.rejected_edges) == 0 and result.start == "chordal"
-    assert result.cost == pytest.approx(solve(graph, "l2", init="chordal").cost, rel=1e-6)
+    least_squares = solve(graph, "l2", init="chordal")
+    for options, start in ((GncOptions(), "runs"), (GncOptions(runs_start=False), "chordal")):
+        result = solve(graph, gnc_options=options)
+        assert len(result.rejected_edges) == 0 and result.start == start
+        assert result.cost == pytest.approx(least_squares.cost, rel=1e-6)
     assert len(solve(graph, gnc_options=GUESS_ONLY).rejected_edges) > 0
 
 
