@@ -75,8 +75,9 @@ class Result:
         linear_solver: the linear backend used, `"cholmod"`, `"rslab"` or `"scipy"`.
         residual_norms: `(E,)` whitened residual norms `r` at the solution (never kernel-scaled);
             for graduated methods the solution is the least-squares optimum of the accepted edges.
-        weights: `(E,)` IRLS weight of each edge at the end of the last GNC stage (1 for known
-            inliers and least squares).
+        weights: `(E,)` IRLS weight of each edge at the end of the last GNC stage of the first
+            start (`stages[0].start`: the initial guess or the runs' map; 1 for known inliers and
+            least squares).
         mu: `(E,)` final kernel parameter of each edge (nan for known inliers and for kernels
             without one).
         known_inliers: `(E,)` bool, edges held quadratic (odometry by default).
@@ -98,7 +99,7 @@ class Result:
         message: termination reason.
         time_s: wall time in seconds, from graph to result.
         timings: seconds per solver phase, summed over stages.
-        robust_residual_norms: `(E,)` `r` at the end of the last GNC stage, before the outlier
+        robust_residual_norms: `(E,)` `r` where `weights` are taken, before the outlier
             decision (the robust optimum; equal to `residual_norms` for single-stage methods).
             With `residual_norms` it explains a rejection: a loop far off at both is false.
         init: the initial guess used (`INITIALIZATIONS`).
