@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -47,7 +46,7 @@ from egnc.linear_solvers import resolve_name
 from egnc.marginals import pose_covariances
 from egnc.regroup import regrouped_decision, runs_start
 from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
-from egnc.starts import all_edges_decision, chordal_decision
+from egnc.starts import all_edges_decision, chordal_decision, graduated_decision
 
 __all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
 
@@ -383,7 +382,7 @@ def solve(
         stages += decision.reports
         candidates: dict[str, Decision] = {first: decision}
         if runs is not None and runs.contradicted(decision.inliers):  # the runs' map may be bent
-            other, reports = _decision_from_guess(context, initial, graduate)
+            other, reports = graduated_decision(context, initial, "guess", graduate)
             stages += reports
             if other is not None:
                 candidates["guess"] = other
@@ -460,23 +459,6 @@ def solve(
             disputed=disputed,
         ),
     )
-
-
-def _decision_from_guess(
-    context: StartContext, initial: np.ndarray, graduate: Callable[[np.ndarray, StageStart], GncOutcome]
-) -> tuple[Decision | None, tuple[StageReport, ...]]:
-    """The GNC stage from the initial guess `(N, n, n)` and its decision, labelled `"guess"`.
-
-    Runs where the GNC stage started from the loops in runs and its decision rejected a run
-    (`egnc.regroup.RunsStart.contradicted`); None where the stage fails numerically.
-    """
-    outcome = graduate(initial, "guess")
-    if outcome.status == NUMERICAL_FAILURE:
-        return None, outcome.stages
-    r = context.factors.whitened_norms(context.factors.residuals(outcome.poses))
-    inliers = classify_inliers(r, context.robust, context.graph.tangent_dim, context.gnc_options)
-    decision = context.decide(outcome.poses, inliers, "guess")
-    return decision, (*outcome.stages, *decision.reports)
 
 
 def _nothing_to_optimize(

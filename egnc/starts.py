@@ -167,9 +167,25 @@ def all_edges_decision(
     at_guess = truncated_cost(factors.whitened_norms(factors.residuals(guess)), robust, d, q)
     if truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, q) >= at_guess:
         return None, ()
-    outcome = graduate(poses, "chordal-all")
+    return graduated_decision(context, poses, "chordal-all", graduate)
+
+
+def graduated_decision(
+    context: StartContext,
+    poses: np.ndarray,
+    start: StageStart,
+    graduate: Callable[[np.ndarray, StageStart], GncOutcome],
+) -> tuple[Decision | None, tuple[StageReport, ...]]:
+    """The GNC stage from `poses` `(N, n, n)` and the decision from its classification, labelled `start`.
+
+    Returns:
+        `(decision, reports)`: the decision, or None where the GNC stage failed numerically,
+        and the reports of the GNC stage and the rounds.
+    """
+    outcome = graduate(poses, start)
     if outcome.status == NUMERICAL_FAILURE:
         return None, outcome.stages
-    r = factors.whitened_norms(factors.residuals(outcome.poses))
-    decision = context.decide(outcome.poses, classify_inliers(r, robust, d, gnc_options), "chordal-all")
+    r = context.factors.whitened_norms(context.factors.residuals(outcome.poses))
+    inliers = classify_inliers(r, context.robust, context.graph.tangent_dim, context.gnc_options)
+    decision = context.decide(outcome.poses, inliers, start)
     return decision, (*outcome.stages, *decision.reports)
