@@ -122,6 +122,17 @@ def loop_runs(loops: BetweenFactors, poses: np.ndarray, threshold: float, window
     return connected_components(len(loops.edges), pairs)[1]
 
 
+def _runs_at(context: StartContext, loops: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`(labels, in_run)`, both `(K,)`, of the loop closures `loops` (edge indices) at `poses` `(N, n, n)`.
+
+    `labels` are their runs (`loop_runs` at re-admission's quantile, `egnc.decision.readmit_quantile`);
+    `in_run` is true where a loop's run has at least `MIN_RUN` loops.
+    """
+    quantile = readmit_quantile(context.gnc_options, context.robust)
+    labels = loop_runs(context.factors.subset(loops), poses, chi2_quantile(quantile, context.graph.tangent_dim))
+    return labels, np.bincount(labels, minlength=1)[labels] >= MIN_RUN
+
+
 def regrouped_decision(context: StartContext, to_beat: Decision) -> tuple[Decision | None, tuple[StageReport, ...]]:
     """The decision with `to_beat`'s rejected runs of loops put back together (module docstring).
 
@@ -135,9 +146,7 @@ def regrouped_decision(context: StartContext, to_beat: Decision) -> tuple[Decisi
     """
     graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
     rejected = np.flatnonzero(robust & ~to_beat.inliers)
-    threshold = chi2_quantile(readmit_quantile(gnc_options, robust), graph.tangent_dim)
-    labels = loop_runs(factors.subset(rejected), to_beat.poses, threshold)
-    in_run = np.bincount(labels, minlength=1)[labels] >= MIN_RUN
+    in_run = _runs_at(context, rejected, to_beat.poses)[1]
     if not in_run.any():
         return None, ()
     regrouped = to_beat.inliers.copy()
@@ -189,9 +198,7 @@ def runs_start(context: StartContext, poses: np.ndarray) -> RunsStart | None:
     graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
     loops = np.flatnonzero(robust)
-    threshold = chi2_quantile(readmit_quantile(gnc_options, robust), d)
-    labels = loop_runs(factors.subset(loops), poses, threshold)
-    in_run = np.bincount(labels, minlength=1)[labels] >= MIN_RUN
+    labels, in_run = _runs_at(context, loops, poses)
     if not in_run.any():
         return None
     keep = ~robust
