@@ -242,10 +242,29 @@ class _Graduation:
     mu_history: np.ndarray
     residual_history: np.ndarray
     status: int
+    cost: float = np.nan  # the whole map's kernel cost after the last stage, at its mu
     analysed: bool = False
     region_poses: int = 0
     whole_map: bool = False
     restarted: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class _Saved:
+    """The part of the estimate a solve may change, as it was before: a region's pose rows and
+    edges (its solves write into them), or the whole map's arrays (its solves replace them).
+
+    Attributes:
+        rows: `(M,)` pose rows, or None for every row.
+        T: `(M, n, n)` (or `(N, n, n)`) their poses.
+        edges: `(K,)` edges, or None for every edge.
+        r: `(K,)` (or `(E,)`) their whitened residual norms.
+    """
+
+    rows: np.ndarray | None
+    T: np.ndarray
+    edges: np.ndarray | None
+    r: np.ndarray
 
 
 @dataclass
@@ -717,13 +736,14 @@ class OnlineSolver:
             analysed = self._problem is None
             return replace(self._stages(None, graduating, new_loops, trusted), analysed=analysed, whole_map=True)
         region_poses = int(local.free.sum())
-        before = self._T, self._r.copy(), self._mu.copy()
+        before, mu_before = self._save(local), self._mu[graduating]  # the stages change mu there only
         was_far = self._far()
         in_region = replace(self._stages(local, graduating, new_loops, trusted), region_poses=region_poses)
         if in_region.status == NUMERICAL_FAILURE:
             return in_region
         if self._crossed(was_far, new_loops):
-            self._T, self._r, self._mu = before
+            self._restore(before)
+            self._mu[graduating] = mu_before
             analysed = self._problem is None
             redone = self._stages(None, graduating, new_loops, trusted)
             return replace(
@@ -733,11 +753,11 @@ class OnlineSolver:
                 region_poses=region_poses,
                 whole_map=True,
             )
-        if self._boundary_strained(local, neighbourhoods):
+        if self._boundary_strained(local, neighbourhoods, in_region.cost):
             # The region's boundary pulls on the rest: the whole map takes the last stage's steps
             # from the local optimum.
             analysed = self._problem is None
-            last = self._solve_stage(None, self._stage_options()[0], trusted)
+            last = self._solve_stage(None, self._stage_options()[0], trusted, None)
             return replace(
                 in_region, reports=in_region.reports + (last,), status=last.status, analysed=analysed, whole_map=True
             )
@@ -778,7 +798,10 @@ class OnlineSolver:
         """Graduate the loops `graduating` from `mu_init` on `local` (None: the whole map)."""
         tight, intermediate = self._stage_options()
         self._mu[graduating] = self._mu_init[graduating]
-        before_T, before_r = self._T, self._r.copy()  # the map before the update
+        before = self._save(local)  # the map before the update
+        # A region's stages keep the whole map's per-edge costs current where they change (its
+        # edges, the loops whose mu moves), not over every edge of the map per stage.
+        costs = None if local is None else KernelLoss(self._kernel, self._mu, self._robust).cost(self._r)
         restarted = False
         active = graduating & (self._mu < 1.0)  # loops whose mu still moves this update
         strong = np.zeros(len(self._edges), dtype=bool)
@@ -789,8 +812,8 @@ class OnlineSolver:
         while True:
             final = not np.any(active & (self._mu < 1.0))
             if final and stage_index > 0:
-                restarted = self._start_from_lower(before_T, before_r)
-            solution = self._solve_stage(local, tight if final else intermediate, trusted)
+                restarted = self._start_from_lower(before, costs)
+            solution = self._solve_stage(local, tight if final else intermediate, trusted, costs)
             reports.append(solution)
             history.append(self._mu[new_loops].copy())
             residuals.append(self._r[new_loops].copy())
@@ -800,51 +823,79 @@ class OnlineSolver:
             # EGNC's strong-outlier test uses the same chi-square 0.9 quantile as the mu_init reset.
             strong |= active & self._far()
             self._mu[active] = self._next_mu(stage_index, active, strong)
+            if costs is not None:
+                self._refresh_costs(costs, np.flatnonzero(active))
         shape = (len(history), len(new_loops))
         return _Graduation(
             tuple(reports),
             np.array(history).reshape(shape),
             np.array(residuals).reshape(shape),
             reports[-1].status,
+            cost=reports[-1].cost if costs is None else float(np.sum(costs)),
             restarted=restarted,
         )
 
-    def _start_from_lower(self, before_T: np.ndarray, before_r: np.ndarray) -> bool:
-        """Before the last stage: go back to the map before the update (poses `before_T`
-        `(N, n, n)`, residual norms `before_r` `(E,)`) when it costs less at the current `mu` than
-        the map the earlier stages bent; returns whether it did (module docstring)."""
-        loss = KernelLoss(self._kernel, self._mu, self._robust)
-        if float(np.sum(loss.cost(before_r))) >= float(np.sum(loss.cost(self._r))):
+    def _start_from_lower(self, before: _Saved, costs: np.ndarray | None) -> bool:
+        """Before the last stage: go back to the map `before` the update when it costs less at the
+        current `mu` than the map the earlier stages bent (compared over the edges `before` holds:
+        the others are the same in both); returns whether it did (module docstring).
+
+        `costs`: the region's per-edge costs `(E,)` (`_stages`), kept current."""
+        edges = slice(None) if before.edges is None else before.edges
+        loss = KernelLoss(self._kernel, self._mu[edges], self._robust[edges])
+        if float(np.sum(loss.cost(before.r))) >= float(np.sum(loss.cost(self._r[edges]))):
             return False
-        self._T, self._r = before_T, before_r
+        self._restore(before)
+        if costs is not None and before.edges is not None:
+            self._refresh_costs(costs, before.edges)
         return True
 
-    def _solve_stage(self, local: LocalProblem | None, options: SolverOptions, trusted: np.ndarray) -> StageReport:
-        """One stage at the current `mu`: the local problem's poses, or the whole map (None)."""
+    def _save(self, local: LocalProblem | None) -> _Saved:
+        """What the stages on `local` (None: the whole map) may change of the estimate (`_Saved`)."""
+        if local is None:  # whole-map solves replace the arrays, never write into them
+            return _Saved(None, self._T, None, self._r)
+        return _Saved(local.rows, self._T[local.rows], local.edges, self._r[local.edges])
+
+    def _restore(self, saved: _Saved) -> None:
+        """Put the estimate back as `saved` holds it."""
+        if saved.rows is None or saved.edges is None:
+            self._T, self._r = saved.T, saved.r
+        else:
+            self._T[saved.rows] = saved.T
+            self._r[saved.edges] = saved.r
+
+    def _refresh_costs(self, costs: np.ndarray, edges: np.ndarray) -> None:
+        """Recompute the per-edge kernel costs `costs` `(E,)` of `edges` at the current `r` and `mu`."""
+        costs[edges] = KernelLoss(self._kernel, self._mu[edges], self._robust[edges]).cost(self._r[edges])
+
+    def _solve_stage(
+        self, local: LocalProblem | None, options: SolverOptions, trusted: np.ndarray, costs: np.ndarray | None
+    ) -> StageReport:
+        """One stage at the current `mu`: the whole map (`local` None), or the local problem's
+        poses, written into the estimate, with `costs` `(E,)`, the whole map's per-edge costs
+        (`_stages`), kept current."""
         started = time.perf_counter()
-        loss = KernelLoss(self._kernel, self._mu.copy(), self._robust)
         if local is None:
+            loss = KernelLoss(self._kernel, self._mu.copy(), self._robust)
             solution = solve_least_squares(self._current_problem(), self._T, loss, options, trusted=trusted)
             self._T, self._r = solution.poses, solution.residual_norms
             cost = solution.cost
         else:
+            assert costs is not None, "a region's stages keep the whole map's costs"
             edges = local.edges
             # The stop rule of the whole map's solve: a decrease below rel_cost_tol of the whole cost.
-            whole_costs = loss.cost(self._r)
-            local_cost, whole_cost = float(np.sum(whole_costs[edges])), float(np.sum(whole_costs))
+            local_cost, whole_cost = float(np.sum(costs[edges])), float(np.sum(costs))
             # A region is small: one factorization of all its edges beats CG's preconditioner analysis.
             scaled = replace(
                 options,
                 rel_cost_tol=options.rel_cost_tol * whole_cost / max(local_cost, 1e-300),
                 linear_method="direct",
             )
-            solution = solve_least_squares(
-                local.problem, self._T[local.rows], loss.subset(edges), scaled, trusted=trusted[edges]
-            )
-            T = self._T.copy()
-            T[local.rows] = solution.poses
-            self._T, self._r = T, self._r.copy()
+            loss = KernelLoss(self._kernel, self._mu[edges], self._robust[edges])
+            solution = solve_least_squares(local.problem, self._T[local.rows], loss, scaled, trusted=trusted[edges])
+            self._T[local.rows] = solution.poses
             self._r[edges] = solution.residual_norms
+            self._refresh_costs(costs, edges)
             cost = whole_cost - local_cost + solution.cost
         mu_loops = self._mu[self._robust]
         return StageReport(
@@ -865,17 +916,17 @@ class OnlineSolver:
             return None
         return LocalProblem.build(region, neighbourhoods, self._current_factors(), self._gauge, self.linear_solver)
 
-    def _boundary_strained(self, local: LocalProblem, neighbourhoods: Neighbourhoods) -> bool:
+    def _boundary_strained(self, local: LocalProblem, neighbourhoods: Neighbourhoods, whole_cost: float) -> bool:
         """Whether the boundary poses' own Newton steps would lower the cost by more than
-        `BOUNDARY_SHARE` of the update's tolerance (`egnc.region.block_jacobi_decrease`)."""
+        `BOUNDARY_SHARE` of the update's tolerance (`egnc.region.block_jacobi_decrease`), that
+        is of `rel_cost_tol` times `whole_cost`, the whole map's kernel cost."""
         boundary = local.boundary[local.boundary != self._gauge]
         if not len(boundary):
             return False
         edges = neighbourhoods.edges_of(boundary)
-        loss = KernelLoss(self._kernel, self._mu, self._robust)
-        weights = loss.subset(edges).weight(self._r[edges])
+        weights = KernelLoss(self._kernel, self._mu[edges], self._robust[edges]).weight(self._r[edges])
         decrease = block_jacobi_decrease(self._current_factors(), edges, self._T, weights, boundary)
-        tolerance = self._stage_options()[0].rel_cost_tol * float(np.sum(loss.cost(self._r)))
+        tolerance = self._stage_options()[0].rel_cost_tol * whole_cost
         return float(decrease.sum()) > BOUNDARY_SHARE * tolerance
 
     def _next_mu(self, stage_index: int, active: np.ndarray, strong: np.ndarray) -> np.ndarray:

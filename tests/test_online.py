@@ -656,6 +656,26 @@ def test_a_region_that_would_strain_the_map_falls_back_to_the_whole_map():
     np.testing.assert_allclose(local_poses, whole_poses, atol=1e-3)
 
 
+def test_a_region_update_reports_the_whole_map_cost_where_loops_outside_it_regraduate():
+    # A loop 2 -> 10 that fits (8.5 m against 8 m of odometry) has mu_init = 0, so the update of
+    # a new loop 22 -> 59 graduates it too (regraduate="reference"): its mu moves 0 -> mu* -> 1
+    # while the region, one hop around 22 and 59, leaves its poses where they are. The stages
+    # write only the region's rows and keep the whole map's costs current where they change;
+    # the last stage's cost is the whole map's at the end, the loop 2 -> 10 at mu = 1 included.
+    solver = _chain_of_60(1, 100.0)
+    solver.add_loop(2, 10, [8.5, 0.0, 0.0], np.diag([100.0, 100.0, 400.0]))
+    solver.update()
+    poses_before = solver.poses
+    solver.add_loop(22, 59, [35.0, 0.0, 0.0], np.diag([1.0, 1.0, 4.0]) * 1e4)
+    report = solver.update()
+    assert report.region_poses == 6 and not report.whole_map and report.restarted
+    outside = int(np.flatnonzero((solver.edge_ids == [2, 10]).all(axis=1))[0])
+    assert report.graduated == 3 and solver.mu[outside] == 1.0 and solver.residual_norms[outside] > 0.3
+    np.testing.assert_array_equal(solver.poses[:20], poses_before[:20])  # outside the region
+    loss = KernelLoss(make_kernel("sig", c=3.0), solver.mu, solver.is_loop_closure)
+    np.testing.assert_allclose(report.stages[-1].cost, loss.cost(solver.residual_norms).sum(), rtol=1e-12)
+
+
 def test_a_new_loop_past_the_strong_outlier_line_on_arrival_is_decided_in_its_region():
     # The loop disagrees by 2 m at 0.01 m: r = 200 before anything is solved. Its mu = 0 stage bends
     # the region, the last stage starts from the map before the update, and it ends past the line
