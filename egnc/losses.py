@@ -30,8 +30,7 @@ class KernelLoss:
     robust: np.ndarray
 
     def cost(self, r: np.ndarray) -> np.ndarray:
-        """Per-edge cost `(E,)`; the kernel is evaluated on the robust edges only (a few of a
-        long trajectory's edges: an online update's cost over 100 000 edges took 2 ms otherwise)."""
+        """Per-edge cost `(E,)`; the kernel is evaluated on the robust edges only."""
         cost = 0.5 * r * r
         cost[self.robust] = self.kernel.rho(r[self.robust], self.mu[self.robust])
         return cost
