@@ -449,6 +449,11 @@ class StartContext:
             return None
         return to_matrices(self.graph.dim, chordal)
 
+    def cost_at(self, poses: np.ndarray) -> float:
+        """`truncated_cost` of the graph at `poses` `(N, n, n)`, at the outlier test's quantile."""
+        r = self.factors.whitened_norms(self.factors.residuals(poses))
+        return truncated_cost(r, self.robust, self.graph.tangent_dim, self.gnc_options.outlier_quantile)
+
     def decide(self, poses: np.ndarray, inliers: np.ndarray, start: StageStart) -> Decision:
         """`decide_outliers` from `poses` `(N, n, n)` and the first classification `inliers` `(E,)`."""
         return decide_outliers(

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from egnc.connectivity import connected_components
-from egnc.decision import Decision, StartContext, readmit_quantile, truncated_cost
+from egnc.decision import Decision, StartContext, readmit_quantile
 from egnc.factors import BetweenFactors, group_of
 from egnc.gnc import StageReport, classify_inliers
 from egnc.kernels import chi2_quantile
@@ -195,8 +195,7 @@ def runs_start(context: StartContext, poses: np.ndarray) -> RunsStart | None:
         `MIN_RUN` at `poses`, with the runs; None where no such run exists, the backend cannot
         factorize its chordal system, or its truncated cost is not lower than that of `poses`.
     """
-    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
-    d, q = graph.tangent_dim, gnc_options.outlier_quantile
+    graph, robust = context.graph, context.robust
     loops = np.flatnonzero(robust)
     labels, in_run = _runs_at(context, loops, poses)
     if not in_run.any():
@@ -206,8 +205,7 @@ def runs_start(context: StartContext, poses: np.ndarray) -> RunsStart | None:
     start = context.chordal_poses(keep)
     if start is None:  # a chordal system the backend cannot factorize
         return None
-    at_guess = truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, q)
-    if truncated_cost(factors.whitened_norms(factors.residuals(start)), robust, d, q) >= at_guess:
+    if context.cost_at(start) >= context.cost_at(poses):
         return None
     runs = np.full(graph.num_edges, -1, dtype=np.int64)
     runs[loops[in_run]] = labels[in_run]

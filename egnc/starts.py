@@ -120,8 +120,7 @@ def chordal_decision(
     )
     if context.on_stage is not None:
         context.on_stage(report)
-    probe_r = factors.whitened_norms(factors.residuals(probe.poses))
-    if truncated_cost(probe_r, robust, d, q) >= to_beat.truncated_cost:
+    if context.cost_at(probe.poses) >= to_beat.truncated_cost:
         return None, (report,)
     decision = context.decide(probe.poses, inliers, "chordal")
     return decision, (report, *decision.reports)
@@ -155,17 +154,14 @@ def all_edges_decision(
         rejected, too much rejected, no chordal map, a chordal map no better than the guess, a
         failed GNC stage), and the reports of the GNC stage and the rounds.
     """
-    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
-    d, q = graph.tangent_dim, gnc_options.outlier_quantile
+    graph, robust = context.graph, context.robust
     rejected = int(np.count_nonzero(robust & ~to_beat.inliers))
     if not rejected or rejected > ALL_EDGES_SHARE * np.count_nonzero(robust):
         return None, ()
     poses = context.chordal_poses(np.ones(graph.num_edges, dtype=bool))
     if poses is None:  # a chordal system the backend cannot factorize
         return None, ()
-    guess = to_matrices(graph.dim, graph.poses)
-    at_guess = truncated_cost(factors.whitened_norms(factors.residuals(guess)), robust, d, q)
-    if truncated_cost(factors.whitened_norms(factors.residuals(poses)), robust, d, q) >= at_guess:
+    if context.cost_at(poses) >= context.cost_at(to_matrices(graph.dim, graph.poses)):
         return None, ()
     return graduated_decision(context, poses, "chordal-all", graduate)
 
