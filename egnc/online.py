@@ -353,6 +353,7 @@ class OnlineSolver:
         self._Z_inv = np.zeros((0, self._n, self._n))
         self._information = np.zeros((0, self._d, self._d))
         self._robust = np.zeros(0, dtype=bool)
+        self._loops = np.zeros(0, dtype=np.int64)  # indices of the robust edges, increasing
         self._mu = np.zeros(0)
         self._mu_init = np.zeros(0)
         self._r = np.zeros(0)
@@ -484,7 +485,7 @@ class OnlineSolver:
         moving = new_edges[new_r > _RESIDUAL_AT_REST]
         # Without edges there is nothing to solve (a prior has moved the map onto itself already).
         needs_solve = len(self._edges) > 0 and (prior_moved or len(new_loops) > 0 or len(moving) > 0)
-        graduating = np.zeros(len(self._edges), dtype=bool)
+        graduating = np.zeros(0, dtype=np.int64)
         outcome = _Graduation((), np.zeros((0, len(new_loops))), np.zeros((0, len(new_loops))), -1)
         # New loops alone have moved nothing yet: the map factorized after the last solve holds.
         only_loops = needs_solve and not prior_moved and bool(np.all(self._robust[moving]))
@@ -499,8 +500,7 @@ class OnlineSolver:
             # One preconditioner for all stages of the update (one analysis): the edges whose weight
             # is at least trust_weight at its start, the new loops (at mu_init) included, so that CG
             # has only the switched-off loops left to resolve.
-            weights = KernelLoss(self._kernel, self._mu, self._robust).weight(self._r)
-            trusted = weights >= self.options.trust_weight
+            trusted = self._trusted()
             outcome = self._graduate(graduating, new_loops, seeds, trusted)
             self._reset_mu_init()
             solved_whole = outcome.whole_map and outcome.status != NUMERICAL_FAILURE
@@ -512,7 +512,7 @@ class OnlineSolver:
             new_edges=new_edges,
             new_loops=new_loops,
             decided_at_arrival=decided,
-            graduated=int(graduating.sum()),
+            graduated=len(graduating),
             stages=stages,
             mu_history=outcome.mu_history,
             residual_history=outcome.residual_history,
@@ -576,6 +576,7 @@ class OnlineSolver:
         self._grow("_Z_inv", self._group.inverse(Z))
         self._grow("_information", np.array(pending.information).reshape(len(rows), self._d, self._d))
         self._grow("_robust", robust)
+        self._grow("_loops", len(self._robust) - len(robust) + np.flatnonzero(robust))
         self._grow("_mu", np.zeros(len(rows)))
         self._grow("_mu_init", np.zeros(len(rows)))
         if len(rows) or len(pending.pose_ids):
@@ -696,18 +697,16 @@ class OnlineSolver:
         return Problem.from_factors(factors, self._fixed(num_poses), self.linear_solver, fill_reducing=False)
 
     def _graduating(self, new_loops: np.ndarray) -> np.ndarray:
-        """`(E,)` bool: the loops this update graduates from `mu_init` (module docstring)."""
-        graduating = np.zeros(len(self._edges), dtype=bool)
-        graduating[new_loops] = True
+        """`(G,)` increasing edge indices: the loops this update graduates from `mu_init` (module docstring)."""
+        graduating = new_loops
         if self.method == "egnc" and self.online_options.strong_at_arrival:
             # EGNC's strong-outlier test after a solve, applied at the converged current estimate.
-            strong = new_loops[
-                exceeds(self._r[new_loops], self.online_options.high_quantile, self._d, self.gnc_options.threshold)
-            ]
-            self._mu_init[strong] = self._mu[strong] = 1.0
-            graduating[strong] = False
+            strong = self._past(self.online_options.high_quantile, new_loops)
+            self._mu_init[new_loops[strong]] = self._mu[new_loops[strong]] = 1.0
+            graduating = new_loops[~strong]
         if len(new_loops) and self.online_options.regraduate == "reference":
-            graduating |= self._robust & (self._mu_init == 0.0)
+            loops = self._loops
+            graduating = np.union1d(graduating, loops[self._mu_init[loops] == 0.0])
         return graduating
 
     def _factorize_map(self, trusted: np.ndarray, problem: Problem | None = None) -> ConvergedMap | None:
@@ -765,21 +764,36 @@ class OnlineSolver:
 
     def _crossed(self, was_far: np.ndarray, new_loops: np.ndarray) -> bool:
         """Whether a region's stages ended a loop on the other side of the strong-outlier line
-        than `was_far` `(E,)` had it before them: an older loop either way, a new loop (`new_loops`)
-        outwards. Held at its boundary, a region strains where the whole map would turn
-        (`egnc.region`), so such a decision is the whole map's to make. Asked once the stages are
-        done: a new loop's `mu = 0` stage bends the region and pushes older loops past the line
-        for a stage, and the last stage, from the lower map, takes them back. A new loop that
-        arrived past the line and ends inside it was taken by a region stiffer than the map; the
-        boundary test decides whether the whole map takes the last stage on."""
+        than `was_far` (`_far()` before them) had it: an older loop either way, a new loop
+        (`new_loops`, the last loops added) outwards. Held at its boundary, a region strains
+        where the whole map would turn (`egnc.region`), so such a decision is the whole map's to
+        make. Asked once the stages are done: a new loop's `mu = 0` stage bends the region and
+        pushes older loops past the line for a stage, and the last stage, from the lower map,
+        takes them back. A new loop that arrived past the line and ends inside it was taken by
+        a region stiffer than the map; the boundary test decides whether the whole map takes
+        the last stage on."""
         far = self._far()
-        crossed = self._robust & (far != was_far)
-        crossed[new_loops] &= far[new_loops]
+        crossed = far != was_far
+        new = slice(len(far) - len(new_loops), None)
+        crossed[new] &= far[new]
         return bool(np.any(crossed))
 
     def _far(self) -> np.ndarray:
-        """`(E,)` bool: edges whose current residual is past the strong-outlier line (`high_quantile`)."""
-        return exceeds(self._r, self.online_options.high_quantile, self._d, self.gnc_options.threshold)
+        """`(L,)` bool per loop closure (`_loops`): its residual is past the strong-outlier line (`high_quantile`)."""
+        return self._past(self.online_options.high_quantile, self._loops)
+
+    def _past(self, quantile: float, edges: np.ndarray) -> np.ndarray:
+        """`(K,)` bool: which `edges` `(K,)` have a residual above the chi-square `quantile`."""
+        return exceeds(self._r[edges], quantile, self._d, self.gnc_options.threshold)
+
+    def _trusted(self) -> np.ndarray:
+        """`(E,)` bool: the edges whose IRLS weight is at least `trust_weight` (the kernel is
+        evaluated on the loop closures only; the other edges weigh 1)."""
+        loops = self._loops
+        trusted = np.full(len(self._edges), 1.0 >= self.options.trust_weight)
+        weights = self._kernel.weight(self._r[loops], self._mu[loops])
+        trusted[loops] = weights >= self.options.trust_weight
+        return trusted
 
     def _stage_options(self) -> tuple[SolverOptions, SolverOptions]:
         """Options of the last stage (converged to `rel_cost_tol`) and of the stages before it."""
@@ -795,7 +809,7 @@ class OnlineSolver:
         new_loops: np.ndarray,
         trusted: np.ndarray,
     ) -> _Graduation:
-        """Graduate the loops `graduating` from `mu_init` on `local` (None: the whole map)."""
+        """Graduate the loops `graduating` (increasing edge indices) from `mu_init` on `local` (None: the whole map)."""
         tight, intermediate = self._stage_options()
         self._mu[graduating] = self._mu_init[graduating]
         before = self._save(local)  # the map before the update
@@ -803,14 +817,14 @@ class OnlineSolver:
         # edges, the loops whose mu moves), not over every edge of the map per stage.
         costs = None if local is None else KernelLoss(self._kernel, self._mu, self._robust).cost(self._r)
         restarted = False
-        active = graduating & (self._mu < 1.0)  # loops whose mu still moves this update
-        strong = np.zeros(len(self._edges), dtype=bool)
+        active = graduating[self._mu[graduating] < 1.0]  # loops whose mu still moves this update
+        strong = np.zeros(len(active), dtype=bool)
         stage_index = 0
         reports: list[StageReport] = []
         history: list[np.ndarray] = []
         residuals: list[np.ndarray] = []
         while True:
-            final = not np.any(active & (self._mu < 1.0))
+            final = not np.any(self._mu[active] < 1.0)
             if final and stage_index > 0:
                 restarted = self._start_from_lower(before, costs)
             solution = self._solve_stage(local, tight if final else intermediate, trusted, costs)
@@ -821,10 +835,10 @@ class OnlineSolver:
                 break
             stage_index += 1
             # EGNC's strong-outlier test uses the same chi-square 0.9 quantile as the mu_init reset.
-            strong |= active & self._far()
+            strong |= self._past(self.online_options.high_quantile, active)
             self._mu[active] = self._next_mu(stage_index, active, strong)
             if costs is not None:
-                self._refresh_costs(costs, np.flatnonzero(active))
+                self._refresh_costs(costs, active)
         shape = (len(history), len(new_loops))
         return _Graduation(
             tuple(reports),
@@ -897,7 +911,7 @@ class OnlineSolver:
             self._r[edges] = solution.residual_norms
             self._refresh_costs(costs, edges)
             cost = whole_cost - local_cost + solution.cost
-        mu_loops = self._mu[self._robust]
+        mu_loops = self._mu[self._loops]
         return StageReport(
             float(mu_loops.min(initial=np.nan)) if len(mu_loops) else np.nan,
             float(mu_loops.mean()) if len(mu_loops) else np.nan,
@@ -930,26 +944,26 @@ class OnlineSolver:
         return float(decrease.sum()) > BOUNDARY_SHARE * tolerance
 
     def _next_mu(self, stage_index: int, active: np.ndarray, strong: np.ndarray) -> np.ndarray:
-        """The `mu` of the `active` loops at stage `stage_index` >= 1 of an update."""
+        """The `mu` of the `active` loops (edge indices) at stage `stage_index` >= 1 of an
+        update; `strong`: which of them were found strong outliers."""
         if self.method == "risam":
             shared = 0.0
             for _ in range(stage_index):  # riSAM's heuristic from mu_init = 0
                 shared = min(1.0, shared + 1.2 * (shared + 0.1))
-            return np.full(int(active.sum()), shared)
+            return np.full(len(active), shared)
         if stage_index >= 2:
-            return np.ones(int(active.sum()))
+            return np.ones(len(active))
         r = self._r[active]
         mu = np.ones(len(r))
-        band = ~strong[active]
+        band = ~strong
         mu[band] = np.minimum(mu_star(r[band], self.gnc_options.c), 1.0)
         return mu
 
     def _reset_mu_init(self) -> None:
         """After convergence: loops far off start at `mu = 1` next time, loops that fit at `mu = 0`."""
-        high = self._robust & self._far()
-        low = self._robust & ~exceeds(self._r, self.online_options.low_quantile, self._d, self.gnc_options.threshold)
-        self._mu_init[high] = 1.0
-        self._mu_init[low] = 0.0
+        loops = self._loops
+        self._mu_init[loops[self._far()]] = 1.0
+        self._mu_init[loops[~self._past(self.online_options.low_quantile, loops)]] = 0.0
 
     # ------------------------------------------------------------------ reading
 
@@ -1242,6 +1256,7 @@ class OnlineSolver:
         solver._edges, solver._measurements = arrays["edges"], arrays["measurements"]
         solver._Z_inv, solver._information = arrays["Z_inv"], arrays["information"]
         solver._robust, solver._mu, solver._mu_init = arrays["robust"], arrays["mu"], arrays["mu_init"]
+        solver._loops = np.flatnonzero(solver._robust)
         solver._r = arrays["r"]
         solver._update_ms = arrays["update_ms"].tolist()
         solver._update_iterations = arrays["update_iterations"].tolist()
