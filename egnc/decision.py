@@ -78,7 +78,7 @@ from egnc.least_squares import (
     solve_least_squares,
 )
 from egnc.linear_solvers import Factorization, NotPositiveDefiniteError
-from egnc.marginals import covariance_solver, innovations
+from egnc.marginals import ReachEstimate, covariance_solver, innovations
 
 MAX_ROUNDS = 5
 """Refine-and-decide rounds before the classification is taken as it stands."""
@@ -134,7 +134,8 @@ def readmitted(
         return passed
     try:
         covariance_solve = covariance_solver(problem, poses)
-        if _all_agree(problem, poses, factors, candidates, covariance_solve, threshold):
+        estimate = ReachEstimate.of(problem)  # whether exporting the factor can pay (egnc.marginals)
+        if _all_agree(problem, poses, factors, candidates, (covariance_solve, estimate), threshold):
             return rejected.copy()
         floor = _statistic_floor(factors.subset(np.sort(candidates)), poses)
         floor = floor[np.searchsorted(np.sort(candidates), candidates)]  # in candidate order
@@ -142,7 +143,7 @@ def readmitted(
             batch = candidates[start : start + READMIT_BATCH]
             if np.all(floor[start : start + READMIT_BATCH] > threshold):
                 break  # none passes alone, so none passes: no solve needed
-            e, S, own = _batch_innovations(problem, poses, factors, batch, covariance_solve)
+            e, S, own = _batch_innovations(problem, poses, factors, batch, (covariance_solve, estimate))
             ok = sequentially_consistent(e, credited_covariance(S, own), threshold)
             if not ok.any():
                 break
@@ -157,7 +158,7 @@ def _all_agree(
     poses: np.ndarray,
     factors: BetweenFactors,
     candidates: np.ndarray,
-    covariance_solve: Factorization,
+    covariance: tuple[Factorization, ReachEstimate | None],
     threshold: float,
 ) -> bool:
     """Whether every loop of `candidates` `(K,)` (by increasing `r`) passes, batch by batch.
@@ -167,12 +168,12 @@ def _all_agree(
     batch passes only if the batch's joint statistic is at most `len(batch) * threshold`, and a
     joint statistic is at least that of any one of its loops.
     """
-    e, S, _ = _batch_innovations(problem, poses, factors, candidates[-1:], covariance_solve)
+    e, S, _ = _batch_innovations(problem, poses, factors, candidates[-1:], covariance)
     if float(e[0] @ np.linalg.solve(S, e[0])) > min(READMIT_BATCH, len(candidates)) * threshold:
         return False
     for stop in range(len(candidates), 0, -READMIT_BATCH):
         batch = candidates[max(0, stop - READMIT_BATCH) : stop]
-        e, S, _ = _batch_innovations(problem, poses, factors, batch, covariance_solve)
+        e, S, _ = _batch_innovations(problem, poses, factors, batch, covariance)
         if not sequentially_consistent(e, S, threshold).all():
             return False
     return True
@@ -199,11 +200,12 @@ def _batch_innovations(
     poses: np.ndarray,
     factors: BetweenFactors,
     batch: np.ndarray,
-    covariance_solve: Factorization,
+    covariance: tuple[Factorization, ReachEstimate | None],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Innovations `(K, d)`, their covariance `(K d, K d)` and the loops' own covariances `(K, d, d)`, in edge order."""
+    """Innovations `(K, d)`, their covariance `(K d, K d)` and the loops' own covariances `(K, d, d)`,
+    in edge order; `covariance`: the information's factorization and `ReachEstimate`."""
     loops = factors.subset(np.sort(batch))
-    e, S = innovations(problem, poses, loops, covariance_solve)
+    e, S = innovations(problem, poses, loops, *covariance)
     return e, S, np.linalg.inv(loops.information)
 
 

@@ -101,8 +101,9 @@ class Factorization(Protocol):
 
     def __call__(self, rhs: np.ndarray) -> np.ndarray: ...
 
-    def triangular(self) -> TriangularFactor | None:
-        """The factor as sparse arrays (computed on the first call), or None where the backend does not expose it."""
+    def triangular(self, build: bool = True) -> TriangularFactor | None:
+        """The factor as sparse arrays (computed on the first call), or None where the backend
+        does not expose it; with `build=False`, None also where it has not been computed yet."""
         ...
 
 
@@ -278,6 +279,32 @@ def _cholmod_module() -> ModuleType:
     from sksparse import cholmod
 
     return cholmod
+
+
+def exact_factor_pattern(lower: sp.csc_matrix) -> tuple[sp.csc_matrix, np.ndarray] | None:
+    """The pattern of the Cholesky factor of a symmetric matrix with the pattern of `lower` (its
+    lower triangle with every diagonal entry, CSC, in the order it is eliminated), without the
+    explicit zeros a supernodal factor adds; None without CHOLMOD.
+
+    CHOLMOD's simplicial factorization of a diagonally dominant matrix with that pattern (no
+    entry cancels). Returns `(factor, order)`: `factor` `(n, n)` CSC lower triangular, diagonal
+    stored, and `order` `(n,)` the column of `lower` at each of its positions (CHOLMOD postorders
+    the elimination tree).
+    """
+    if not cholmod_available():
+        return None
+    cholmod = _cholmod_module()
+    n = lower.shape[0]
+    columns = np.repeat(np.arange(n), np.diff(lower.indptr))
+    diagonal = lower.indices == columns
+    assert np.count_nonzero(diagonal) == n, "every diagonal entry must be stored"
+    # -1 off the diagonal, each row's count of them plus 1 on it.
+    degree = np.bincount(lower.indices[~diagonal], minlength=n) + np.bincount(columns[~diagonal], minlength=n)
+    values = np.where(diagonal, degree[columns] + 1.0, -1.0)
+    matrix = sp.csc_matrix((values, lower.indices, lower.indptr), shape=(n, n))
+    with serial_native_threads():
+        factor = cholmod.cholesky(matrix, ordering_method="natural", mode="simplicial")
+        return sp.csc_matrix(factor.L()), np.asarray(factor.P(), dtype=np.int64)
 
 
 def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarray:
@@ -502,9 +529,10 @@ class _Factorization:
     def __call__(self, rhs: np.ndarray) -> np.ndarray:
         return self._solve(rhs)
 
-    def triangular(self) -> TriangularFactor | None:
-        """The factor as sparse arrays, or None where the backend does not expose it."""
-        if self._triangular is None and self._build_triangular is not None:
+    def triangular(self, build: bool = True) -> TriangularFactor | None:
+        """The factor as sparse arrays, or None where the backend does not expose it (or, with
+        `build=False`, has not built it yet)."""
+        if build and self._triangular is None and self._build_triangular is not None:
             self._triangular = self._build_triangular()
             self._build_triangular = None  # built, or not exposed: never again
         return self._triangular

@@ -31,13 +31,14 @@ References:
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from egnc.factors import BetweenFactors
 from egnc.least_squares import Problem
-from egnc.linear_solvers import Factorization, TriangularFactor, serial_native_threads
+from egnc.linear_solvers import Factorization, TriangularFactor, exact_factor_pattern, serial_native_threads
 from egnc.normal_equations import NormalEquationsPattern
 
 _MAX_RHS_VALUES = 2**24
@@ -52,6 +53,74 @@ REACH_MAX_SHARE = 0.4
 entries. Per entry and right-hand side it costs 0.53-0.62 ns here, a backend's whole solve
 (forward and back) 0.22 ns (CHOLMOD on a 3D grid's large supernodes) to 1.2 ns (SuperLU): at
 0.4 the reach costs about what the fastest whole solve does (BENCHMARKS.md, issue 18)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ReachEstimate:
+    """Which share of `L`'s entries the reach of a query holds, known before `L` is exported.
+
+    Exporting a large factor (`Factorization.triangular`) copies it: on a 50 000-pose 3D grid
+    that took 2 s and about 1 GiB, above the whole robust solve's peak otherwise, for a reach
+    that holds more than `REACH_MAX_SHARE` of the factor even for one loop (the dense top
+    separators are on every path). The pattern of `L` is the same in every `d x d` block of a
+    pair of poses, so the pose-level structure, factorized without values (`exact_factor_pattern`:
+    a factor with one entry per pose pair), gives the elimination tree and every column's count.
+    It counts no explicit zeros: on the grids measured its shares read 1.0-1.3x the exported
+    factor's (BENCHMARKS.md, issue 18, seventeenth session).
+
+    Attributes:
+        parent: pose-level elimination tree: the parent position of each position, -1 at a root.
+        position: `(B,)` elimination position of each unknown block.
+        entries: `(B,)` entries of `L` in the `d` columns of the block at each position.
+        d: tangent dimension.
+    """
+
+    parent: list[int]
+    position: np.ndarray
+    entries: np.ndarray
+    d: int
+
+    @classmethod
+    def of(cls, problem: Problem) -> ReachEstimate | None:
+        """The estimate for `problem`'s information, or None where the reach is not used (a system
+        below `REACH_MIN_UNKNOWNS`) or cannot be estimated (a backend other than CHOLMOD, whose
+        elimination order is not the pattern's, or no CHOLMOD to factorize the structure)."""
+        pattern, d = problem.pattern, problem.tangent_dim
+        if pattern.size < REACH_MIN_UNKNOWNS or problem.linear_solver.name != "cholmod":
+            return None
+        # Scalar column J d holds every stored block of block column J, d rows each.
+        num_blocks = pattern.size // d
+        starts = pattern.indptr[np.arange(num_blocks) * d]
+        counts = (pattern.indptr[np.arange(num_blocks) * d + 1] - starts) // d
+        rank = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)  # block's place in its column
+        first = np.repeat(starts, counts) + d * rank  # each block's first entry
+        rows, columns = pattern.indices[first] // d, np.repeat(np.arange(num_blocks), counts)
+        lower = rows >= columns
+        blocks = sp.csc_matrix(
+            (np.ones(int(lower.sum())), (rows[lower], columns[lower])), shape=(num_blocks, num_blocks)
+        )
+        exact = exact_factor_pattern(blocks)
+        if exact is None:
+            return None
+        factor, order = exact
+        position = np.empty(num_blocks, dtype=np.int64)
+        position[order] = np.arange(num_blocks)
+        # A block column of c blocks holds d columns of c d, c d - 1, ..., c d - d + 1 entries.
+        entries = d * d * np.diff(factor.indptr) - d * (d - 1) // 2
+        parent = np.full(num_blocks, -1, dtype=np.int64)
+        below = factor.indptr[:-1] + 1  # the diagonal leads each column
+        has_parent = below < factor.indptr[1:]
+        parent[has_parent] = factor.indices[below[has_parent]]
+        return cls(parent.tolist(), position, entries, d)
+
+    def share(self, B: sp.csc_matrix) -> float:
+        """The share of `L`'s entries in the columns of the reach of `B`'s rows (`(n, K)`, unknowns)."""
+        reached: set[int] = set()
+        for position in np.unique(self.position[B.indices // self.d]).tolist():
+            while position >= 0 and position not in reached:  # up the tree to a root or a reached position
+                reached.add(position)
+                position = self.parent[position]
+        return float(self.entries[list(reached)].sum() / self.entries.sum())
 
 
 def covariance_solver(problem: Problem, poses: np.ndarray) -> Factorization:
@@ -155,6 +224,7 @@ def innovations(
     poses: np.ndarray,
     loops: BetweenFactors,
     covariance_solve: Factorization | None = None,
+    estimate: ReachEstimate | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Residuals of loop closures left out of `problem` and their joint predicted covariance.
 
@@ -165,6 +235,8 @@ def innovations(
             covariance is dense).
         covariance_solve: `covariance_solver(problem, poses)`
             if already computed (several batches at one solution share it).
+        estimate: `ReachEstimate.of(problem)`, computed once for the batches that share
+            `covariance_solve`; without it the factor is exported for any large system.
 
     Returns:
         `(e, S)`: `(K, d)` residuals and `(K d, K d)` covariance `blockdiag(Omega^-1) + A H^-1 A^T`.
@@ -178,21 +250,29 @@ def innovations(
         B = transposed_jacobians(problem.pattern, loops.edges, blocks)
         if covariance_solve is None:
             covariance_solve = covariance_solver(problem, poses)
-        S = quadratic_form(B, covariance_solve)
+        S = quadratic_form(B, covariance_solve, estimate)
     block = np.arange(len(e))[:, None] * d + np.arange(d)  # (K, d) rows of each loop
     S[block[:, :, None], block[:, None, :]] += np.linalg.inv(loops.information)
     return e, S
 
 
-def quadratic_form(B: sp.csc_matrix, covariance_solve: Factorization) -> np.ndarray:
+def quadratic_form(
+    B: sp.csc_matrix, covariance_solve: Factorization, estimate: ReachEstimate | None = None
+) -> np.ndarray:
     """`(K, K)` `B^T H^-1 B`, symmetrized, for a sparse `B` `(n, K)` and the factorization of `H`.
 
     Solved on the reach of `B`'s rows (module docstring) when the system has at least
     `REACH_MIN_UNKNOWNS` unknowns, the factor is exposed, the reach holds at most
     `REACH_MAX_SHARE` of it and its solution fits the memory bound of a right-hand side; else by
-    whole solves in column groups.
+    whole solves in column groups. The factor is exported for a query only where the `estimate`
+    of its reach's share (`ReachEstimate`) is at most `REACH_MAX_SHARE`; once exported, its own
+    count decides.
     """
-    factor = covariance_solve.triangular() if B.shape[0] >= REACH_MIN_UNKNOWNS else None
+    factor = None
+    if B.shape[0] >= REACH_MIN_UNKNOWNS:
+        factor = covariance_solve.triangular(build=False)
+        if factor is None and (estimate is None or estimate.share(B) <= REACH_MAX_SHARE):
+            factor = covariance_solve.triangular()
     solved = None if factor is None else _reach_solve(factor, B)
     if factor is not None and solved is not None:
         reach, W = solved

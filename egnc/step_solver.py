@@ -238,9 +238,9 @@ class _PermutedFactorization:
             out[unknowns, columns] = self._ordered(rhs[unknowns, columns])
         return out
 
-    def triangular(self) -> TriangularFactor | None:
-        """The ordered factor, its elimination order mapped back to `A`'s unknowns."""
-        factor = self._ordered.triangular()
+    def triangular(self, build: bool = True) -> TriangularFactor | None:
+        """The ordered factor, its elimination order mapped back to `A`'s unknowns (`Factorization.triangular`)."""
+        factor = self._ordered.triangular(build)
         return None if factor is None else replace(factor, order=self._unknowns[factor.order])
 
 

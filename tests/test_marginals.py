@@ -164,3 +164,67 @@ def test_columns_without_entries_have_zero_covariance_on_the_reach(monkeypatch):
     expected = np.zeros((4, 4))
     expected[0, 0] = np.linalg.inv(matrix)[4, 4]
     np.testing.assert_allclose(quadratic_form(B, factorization), expected, rtol=1e-10, atol=1e-14)
+
+
+CHOLMOD_ONLY = pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")
+
+
+@CHOLMOD_ONLY
+def test_the_exact_factor_pattern_is_that_of_a_dense_cholesky():
+    from egnc.linear_solvers import exact_factor_pattern
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        n = int(rng.integers(2, 40))
+        mask = np.tril(rng.random((n, n)) < 0.1, -1)
+        values = np.where(mask, rng.normal(size=(n, n)), 0.0)
+        matrix = values + values.T
+        matrix += np.diag(np.abs(matrix).sum(axis=0) + 1.0)  # diagonally dominant: positive definite
+        factor, order = exact_factor_pattern(sp.csc_matrix(np.tril(matrix)))
+        dense = np.linalg.cholesky(matrix[np.ix_(order, order)])  # random values: no entry cancels
+        np.testing.assert_array_equal(factor.toarray() != 0, np.abs(dense) > 1e-14)
+
+
+@CHOLMOD_ONLY
+def test_the_reach_estimate_counts_the_entries_of_an_exact_factor_of_the_system(monkeypatch):
+    # Column by column, the pose-level estimate equals the exact (simplicial) factor of the
+    # system itself, in the same order; the reach of a query is the same positions.
+    from egnc.linear_solvers import exact_factor_pattern
+
+    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
+    graph = grid_world(2, 400, seed=3).graph
+    problem = Problem.from_graph(graph, "cholmod")
+    estimate = marginals_module.ReachEstimate.of(problem)
+    assert estimate is not None
+    pattern = problem.pattern
+    lower = sp.csc_matrix((np.ones(pattern.nnz), pattern.indices, pattern.indptr), shape=(pattern.size,) * 2)
+    factor, order = exact_factor_pattern(lower)
+    d = problem.tangent_dim
+    counts = np.diff(factor.indptr)
+    position = np.empty(len(order), dtype=np.int64)
+    position[order] = np.arange(len(order))
+    per_block = np.zeros(pattern.size // d, dtype=np.int64)
+    np.add.at(per_block, estimate.position[order // d], counts)  # scalar columns summed by block
+    np.testing.assert_array_equal(per_block[np.argsort(estimate.position)], estimate.entries)
+    B = sp.csc_matrix(np.eye(pattern.size)[:, np.r_[3 * d : 4 * d, 233 * d : 234 * d]])  # two poses' unknowns
+    reach = marginals_module._ancestors(marginals_module._elimination_tree(factor), position[B.indices])
+    assert estimate.share(B) == pytest.approx(counts[reach].sum() / counts.sum(), rel=1e-12)
+
+
+@CHOLMOD_ONLY
+def test_the_factor_is_exported_only_for_a_reach_the_estimate_lets_pay(monkeypatch):
+    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
+    graph = grid_world(2, 300, seed=5, noise_scale=0.5).graph
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[np.flatnonzero(graph.is_loop_closure)[::3]] = True
+    poses = to_matrices(2, solve(graph.subgraph_edges(~left_out), "l2").graph.poses)
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out), "cholmod")
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    estimate = marginals_module.ReachEstimate.of(problem)
+    whole = innovations(problem, poses, loops)[1]
+    for share, exported in ((0.0, False), (1.0, True)):
+        monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", share)
+        covariance_solve = marginals_module.covariance_solver(problem, poses)
+        S = innovations(problem, poses, loops, covariance_solve, estimate)[1]
+        assert (covariance_solve.triangular(build=False) is not None) == exported
+        np.testing.assert_allclose(S, whole, rtol=1e-9, atol=1e-12)
