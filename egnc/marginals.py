@@ -59,14 +59,13 @@ entries. Per entry and right-hand side it costs 0.53-0.62 ns here, a backend's w
 class ReachEstimate:
     """Which share of `L`'s entries the reach of a query holds, known before `L` is exported.
 
-    Exporting a large factor (`Factorization.triangular`) copies it: on a 50 000-pose 3D grid
-    that took 2 s and about 1 GiB, above the whole robust solve's peak otherwise, for a reach
-    that holds more than `REACH_MAX_SHARE` of the factor even for one loop (the dense top
-    separators are on every path). The pattern of `L` is the same in every `d x d` block of a
-    pair of poses, so the pose-level structure, factorized without values (`exact_factor_pattern`:
-    a factor with one entry per pose pair), gives the elimination tree and every column's count.
-    It counts no explicit zeros: on the grids measured its shares read 1.0-1.3x the exported
-    factor's (BENCHMARKS.md, issue 18, seventeenth session).
+    Exporting a factor (`Factorization.triangular`) copies it, which on large 3D maps is the
+    robust solve's peak memory, while their reaches hold too much of `L` to be used
+    (BENCHMARKS.md, issue 18, seventeenth session). Every `d x d` block of a pair of poses has
+    the same pattern in `L`, so the pose-level pattern, factorized without values
+    (`exact_factor_pattern`), gives the elimination tree and every column's count exactly. It
+    counts no explicit zeros, which a supernodal factor stores: its shares read up to about 1.3x
+    the exported factor's.
 
     Attributes:
         parent: pose-level elimination tree: the parent position of each position, -1 at a root.
