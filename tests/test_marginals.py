@@ -213,15 +213,15 @@ def test_the_reach_estimate_counts_the_entries_of_an_exact_factor_of_the_system(
 
 @CHOLMOD_ONLY
 def test_the_factor_is_exported_only_for_a_reach_the_estimate_lets_pay(monkeypatch):
-    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
     graph = grid_world(2, 300, seed=5, noise_scale=0.5).graph
     left_out = np.zeros(graph.num_edges, dtype=bool)
     left_out[np.flatnonzero(graph.is_loop_closure)[::3]] = True
     poses = to_matrices(2, solve(graph.subgraph_edges(~left_out), "l2").graph.poses)
     problem = Problem.from_graph(graph.subgraph_edges(~left_out), "cholmod")
     loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    whole = innovations(problem, poses, loops)[1]  # a small system: whole solves
+    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
     estimate = marginals_module.ReachEstimate.of(problem)
-    whole = innovations(problem, poses, loops)[1]
     for share, exported in ((0.0, False), (1.0, True)):
         monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", share)
         covariance_solve = marginals_module.covariance_solver(problem, poses)
