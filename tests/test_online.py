@@ -417,6 +417,27 @@ def test_save_and_load_keep_every_number(tmp_path):
         OnlineSolver.load(tmp_path / "missing.npz")
 
 
+def test_the_loop_indices_follow_the_loop_closures_through_growth_and_a_checkpoint(tmp_path):
+    # Updates test and reset the loops by their indices (OnlineSolver._loops): they must be
+    # exactly the loop closures, however edges arrive and after a load.
+    solver, information = _chain("egnc")
+    for k in range(10, 120):
+        solver.add_odometry(k, k + 1, [1.0, 0.0, 0.0], information)
+        if k % 7 == 0:
+            solver.add_loops([[k + 1, k - 5], [k + 1, 3]], [[-6.0, 0.0, 0.0], [2.0, 1.0, 0.0]], [information] * 2)
+        solver.update()
+        np.testing.assert_array_equal(solver._loops, np.flatnonzero(solver.is_loop_closure))
+    solver.save(tmp_path / "s.npz")
+    loaded, _ = OnlineSolver.load(tmp_path / "s.npz")
+    np.testing.assert_array_equal(loaded._loops, solver._loops)
+    for s in (solver, loaded):
+        s.add_odometry(120, 121, [1.0, 0.0, 0.0], information)
+        s.add_loop(121, 110, [11.0, 0.0, 0.0], information)
+        s.update()
+    np.testing.assert_array_equal(loaded._loops, np.flatnonzero(loaded.is_loop_closure))
+    np.testing.assert_array_equal(loaded.poses, solver.poses)
+
+
 def test_a_loaded_solver_predicts_from_the_same_factorized_map(tmp_path):
     solver, information = _chain("egnc", decide_at_arrival=True)
     solver.add_loop(0, 10, [10.05, 0.0, 0.0], information)
