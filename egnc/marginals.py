@@ -87,17 +87,15 @@ class ReachEstimate:
         pattern, d = problem.pattern, problem.tangent_dim
         if pattern.size < REACH_MIN_UNKNOWNS or problem.linear_solver.name != "cholmod":
             return None
-        # Scalar column J d holds every stored block of block column J, d rows each.
+        # CHOLMOD's pattern is the lower triangle: scalar column J d holds the stored blocks of
+        # block column J, d sorted rows each, the diagonal block first.
         num_blocks = pattern.size // d
         starts = pattern.indptr[np.arange(num_blocks) * d]
         counts = (pattern.indptr[np.arange(num_blocks) * d + 1] - starts) // d
-        rank = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)  # block's place in its column
-        first = np.repeat(starts, counts) + d * rank  # each block's first entry
-        rows, columns = pattern.indices[first] // d, np.repeat(np.arange(num_blocks), counts)
-        lower = rows >= columns
-        blocks = sp.csc_matrix(
-            (np.ones(int(lower.sum())), (rows[lower], columns[lower])), shape=(num_blocks, num_blocks)
-        )
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        rank = np.arange(indptr[-1]) - np.repeat(indptr[:-1], counts)  # each block's place in its column
+        rows = pattern.indices[np.repeat(starts, counts) + d * rank] // d
+        blocks = sp.csc_matrix((np.ones(len(rows)), rows, indptr), shape=(num_blocks, num_blocks))
         exact = exact_factor_pattern(blocks)
         if exact is None:
             return None
