@@ -21,7 +21,9 @@ The joint covariance of a few queries (`innovations`) needs less: with `H = P^T 
 the positions whose elimination depends on them (their ancestors in the elimination tree). So
 `W` is solved with the columns of `L` on that reach only, where the backend exposes its factor
 (`egnc.linear_solvers.TriangularFactor`): on a 100 000-pose 2D grid a 64-loop batch's reach is
-7 % of the unknowns and 31 % of `L`'s entries (BENCHMARKS.md, issue 18).
+7 % of the unknowns and 31 % of `L`'s entries (BENCHMARKS.md, issue 18). The reach's columns are
+taken in dense panels, one per run of columns that share their rows below (a supernode of `L`):
+each panel is a dense triangular solve and a matrix product on all right-hand sides at once.
 
 References:
     M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data
@@ -49,10 +51,11 @@ REACH_MIN_UNKNOWNS = 50_000
 exposing the factor and importing SciPy's triangular solver (BENCHMARKS.md, issue 18)."""
 
 REACH_MAX_SHARE = 0.4
-"""The reach solve is used when the columns of `L` on the reach hold at most this share of its
-entries. Per entry and right-hand side it costs 0.53-0.62 ns here, a backend's whole solve
-(forward and back) 0.22 ns (CHOLMOD on a 3D grid's large supernodes) to 1.2 ns (SuperLU): at
-0.4 the reach costs about what the fastest whole solve does (BENCHMARKS.md, issue 18)."""
+"""The factor is exported and the reach solved when the columns of `L` on the reach hold at most
+this share of its entries. In time the reach pays at any share (its panels cost about a third of
+a whole forward and back solve per entry and right-hand side); the bound keeps the export, a
+copy of `L`, off systems whose queries reach most of `L` (3D grids), where that copy would set
+the robust solve's peak memory (BENCHMARKS.md, issue 18)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -299,32 +302,70 @@ def _reach_solve(factor: TriangularFactor, B: sp.csc_matrix) -> tuple[np.ndarray
     reach = _ancestors(_elimination_tree(lower), sources)
     if not worth_it(reach):  # nor is the factor's whole reach, which holds this one
         return None
-    local = np.full(n, -1, dtype=np.int64)
-    local[reach] = np.arange(len(reach))
-    columns = lower[:, reach]
-    if np.any(local[columns.indices] < 0):  # a factor whose columns reach past their tree ancestors
-        reach = _ancestors(lower, sources)
-        if not worth_it(reach):
-            return None
-        local[reach] = np.arange(len(reach))
-        columns = lower[:, reach]
-    from scipy.sparse.linalg import spsolve_triangular
+    rhs = sp.csc_matrix((B.data, rows, B.indptr), shape=(n, B.shape[1]))
+    with serial_native_threads():  # BLAS calls on small panels: one thread (egnc.linear_solvers)
+        solved = _forward_solve_on(lower, reach, rhs)
+        if solved is None:  # a factor whose columns reach past their tree ancestors
+            reach = _ancestors(lower, sources)
+            if not worth_it(reach):
+                return None
+            solved = _forward_solve_on(lower, reach, rhs)
+    assert solved is not None, "the reach along the factor's own columns holds every row they reach"
+    return reach, solved
 
-    # In SuperLU's index type, with unit columns (L = L1 diag(l), so W = diag(l)^-1 L1^-1 rhs):
-    # spsolve_triangular would otherwise copy the whole restricted factor twice, to scale it and
-    # to cast its indices, and on a 50 000-pose 3D grid those copies set the robust solve's peak.
-    restricted = sp.csc_matrix(
-        (columns.data, local[columns.indices].astype(np.intc), columns.indptr.astype(np.intc)),
-        shape=(len(reach),) * 2,
-    )
-    del columns
-    inverse = 1.0 / restricted.data[restricted.indptr[:-1]]  # the diagonal leads each sorted column
-    restricted.data *= np.repeat(inverse, np.diff(restricted.indptr))
-    rhs = sp.csc_matrix((B.data, local[rows], B.indptr), shape=(len(reach), B.shape[1])).toarray()
-    with serial_native_threads():  # SuperLU's triangular solve calls SciPy's OpenBLAS
-        W = spsolve_triangular(restricted, rhs, lower=True, unit_diagonal=True, overwrite_A=True, overwrite_b=True)
-    W *= inverse[:, None]
-    return reach, W
+
+def _forward_solve_on(lower: sp.csc_matrix, reach: np.ndarray, rhs: sp.csc_matrix) -> np.ndarray | None:
+    """`(m, K)` rows `reach` `(m,)` of `L^-1 rhs` (`rhs` `(n, K)`, zero outside `reach`), panel by
+    panel; None where a row of a reach column lies outside `reach` (`L^-1 rhs` is then not zero there).
+
+    A panel is a run of consecutive columns each of which holds its diagonal and then exactly the
+    rows of the next (a supernode of `L`): `w` columns over `r` rows below them are one dense
+    `w x w` triangular solve and one `r x w` product on all right-hand sides at once (BLAS 3)
+    instead of `w` sparse column updates. Runs whose counts and first rows suggest a panel are
+    checked row by row and, where the rows differ, solved one column at a time.
+    """
+    from scipy.linalg import solve_triangular  # SciPy's dense linear algebra: imported where it is used
+
+    indptr, indices, data = lower.indptr, lower.indices, lower.data
+    local = np.full(lower.shape[0], -1, dtype=np.int64)
+    local[reach] = np.arange(len(reach))
+    solution = sp.csc_matrix((rhs.data, local[rhs.indices], rhs.indptr), shape=(len(reach), rhs.shape[1])).toarray()
+
+    def solve_panel(start: int, end: int) -> bool | None:
+        """Solve reach positions `start..end - 1` as one panel: True, or False where their rows do
+        not form one, None where a row is outside the reach."""
+        first, last = int(reach[start]), int(reach[end - 1])
+        width = end - start
+        below = indices[indptr[last] + 1 : indptr[last + 1]]  # rows under the panel's triangle
+        if np.any(local[below] < 0):
+            return None
+        begin, stop = indptr[first], indptr[last + 1]
+        column = np.repeat(np.arange(width), np.diff(indptr[first : last + 2]))
+        row = np.arange(stop - begin) - (indptr[first : last + 1] - begin)[column] + column  # within the panel
+        if not np.array_equal(indices[begin:stop], np.concatenate([np.arange(first, last + 1), below])[row]):
+            return False
+        height = width + len(below)
+        panel = np.zeros((width, height))  # transposed: column k of the panel is row k here
+        panel[column, row] = data[begin:stop]
+        block = solve_triangular(panel[:, :width].T, solution[start:end], lower=True, check_finite=False)
+        solution[start:end] = block
+        if len(below):
+            solution[local[below]] -= panel[:, width:].T @ block
+        return True
+
+    counts = indptr[reach + 1] - indptr[reach]
+    next_row = indices[np.minimum(indptr[reach] + 1, len(indices) - 1)]  # first row below each diagonal
+    joined = np.zeros(len(reach), dtype=bool)
+    joined[1:] = (np.diff(reach) == 1) & (counts[:-1] == counts[1:] + 1) & (next_row[:-1] == reach[1:])
+    starts = np.flatnonzero(~joined)
+    ends = np.concatenate([starts[1:], [len(reach)]])[: len(starts)]  # none for an empty reach
+    for start, end in zip(starts.tolist(), ends.tolist(), strict=True):
+        solved = solve_panel(start, end)
+        if solved is False:  # one column alone is always a panel
+            solved = all(solve_panel(k, k + 1) is not None for k in range(start, end))
+        if not solved:
+            return None
+    return solution
 
 
 def _entries(lower: sp.csc_matrix, positions: np.ndarray) -> int:

@@ -132,6 +132,19 @@ def test_a_factor_whose_columns_reach_past_their_tree_ancestors_is_solved_on_its
     np.testing.assert_allclose(W[:, 0], np.linalg.solve(lower.toarray(), [1.0, 0.0, 0.0]))
 
 
+def test_a_panel_joins_only_columns_whose_rows_continue_each_other(monkeypatch):
+    # Columns 0 and 1 look like one supernode by their counts (3 and 2) and column 0's first row
+    # below the diagonal (1), but column 0 holds row 3 where column 1 holds row 2: solved as one
+    # panel, column 0's row-3 entry would land on row 2. Columns 2 and 3 do form one.
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    lower = np.array([[2.0, 0, 0, 0], [0.5, 1.5, 0, 0], [0.0, -0.7, 1.2, 0], [0.3, 0.0, 0.4, 1.1]])
+    factor = TriangularFactor(sp.csc_matrix(lower), np.arange(4), None)
+    B = sp.csc_matrix(np.array([[1.0, 0.2], [0.0, 1.0], [0.0, 0.0], [0.0, 0.0]]))
+    reach, W = marginals_module._reach_solve(factor, B)
+    np.testing.assert_array_equal(reach, [0, 1, 2, 3])
+    np.testing.assert_allclose(W, np.linalg.solve(lower, B.toarray()), rtol=1e-14, atol=1e-15)
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_innovations_of_a_problem_in_block_order_are_the_same_on_the_reach(backend, monkeypatch):
     # SciPy factorizes a problem's pattern in its block order (`_InBlockOrder`): the exposed
@@ -228,3 +241,27 @@ def test_the_factor_is_exported_only_for_a_reach_the_estimate_lets_pay(monkeypat
         S = innovations(problem, poses, loops, covariance_solve, estimate)[1]
         assert (covariance_solve.triangular(build=False) is not None) == exported
         np.testing.assert_allclose(S, whole, rtol=1e-9, atol=1e-12)
+
+
+@CHOLMOD_ONLY
+def test_the_reach_solve_on_a_supernodal_factor_equals_whole_solves(monkeypatch):
+    # A 3D grid's factor has wide supernodes: the reach is solved in dense panels of many columns.
+    graph = grid_world(3, 1500, seed=2).graph
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[np.flatnonzero(graph.is_loop_closure)[::7]] = True
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out), "cholmod")
+    poses = to_matrices(3, graph.poses)
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    covariance_solve = marginals_module.covariance_solver(problem, poses)
+    whole = innovations(problem, poses, loops, covariance_solve)[1]
+    monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
+    monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", 1.0)
+    reached = []
+    monkeypatch.setattr(marginals_module, "_reach_solve", spy(marginals_module._reach_solve, reached))
+    on_reach = innovations(problem, poses, loops, covariance_solve)[1]
+    assert reached == [True]
+    factor = covariance_solve.triangular()
+    # Consecutive columns whose counts fall by one (the diagonal) are a supernode's.
+    steps = np.concatenate([[False], np.diff(np.diff(factor.lower.indptr)) == -1, [False]])
+    assert np.max(np.diff(np.flatnonzero(~steps))) > 6  # panels wider than one pose
+    np.testing.assert_allclose(on_reach, whole, rtol=1e-9, atol=1e-12)
