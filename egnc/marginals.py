@@ -107,11 +107,7 @@ class ReachEstimate:
         position[order] = np.arange(num_blocks)
         # A block column of c blocks holds d columns of c d, c d - 1, ..., c d - d + 1 entries.
         entries = d * d * np.diff(factor.indptr) - d * (d - 1) // 2
-        parent = np.full(num_blocks, -1, dtype=np.int64)
-        below = factor.indptr[:-1] + 1  # the diagonal leads each column
-        has_parent = below < factor.indptr[1:]
-        parent[has_parent] = factor.indices[below[has_parent]]
-        return cls(parent.tolist(), position, entries, d)
+        return cls(_tree_parents(factor).tolist(), position, entries, d)
 
     def share(self, B: sp.csc_matrix) -> float:
         """The share of `L`'s entries in the columns of the reach of `B`'s rows (`(n, K)`, unknowns)."""
@@ -354,9 +350,9 @@ def _forward_solve_on(lower: sp.csc_matrix, reach: np.ndarray, rhs: sp.csc_matri
         return True
 
     counts = indptr[reach + 1] - indptr[reach]
-    next_row = indices[np.minimum(indptr[reach] + 1, len(indices) - 1)]  # first row below each diagonal
+    parents = _tree_parents(lower, reach)
     joined = np.zeros(len(reach), dtype=bool)
-    joined[1:] = (np.diff(reach) == 1) & (counts[:-1] == counts[1:] + 1) & (next_row[:-1] == reach[1:])
+    joined[1:] = (np.diff(reach) == 1) & (counts[:-1] == counts[1:] + 1) & (parents[:-1] == reach[1:])
     starts = np.flatnonzero(~joined)
     ends = np.concatenate([starts[1:], [len(reach)]])[: len(starts)]  # none for an empty reach
     for start, end in zip(starts.tolist(), ends.tolist(), strict=True):
@@ -373,15 +369,25 @@ def _entries(lower: sp.csc_matrix, positions: np.ndarray) -> int:
     return int(np.sum(np.diff(lower.indptr)[positions]))
 
 
+def _tree_parents(lower: sp.csc_matrix, columns: np.ndarray | None = None) -> np.ndarray:
+    """`(c,)` the elimination-tree parent of each of `columns` (default: all) of `lower`, a CSC
+    lower triangle with sorted rows: the first row below the diagonal of its column, -1 for a root."""
+    columns = np.arange(lower.shape[0]) if columns is None else columns
+    first_below = lower.indptr[columns] + (lower.indices[lower.indptr[columns]] == columns)
+    has_parent = first_below < lower.indptr[columns + 1]
+    parents = np.full(len(columns), -1, dtype=np.int64)
+    parents[has_parent] = lower.indices[first_below[has_parent]]
+    return parents
+
+
 def _elimination_tree(lower: sp.csc_matrix) -> sp.csc_matrix:
     """`(n, n)` pattern whose column `k` holds the parent of position `k` in the elimination tree of
-    `lower` (the first row below the diagonal of its column), empty for a root."""
+    `lower` (`_tree_parents`), empty for a root."""
     n = lower.shape[0]
-    first_below = lower.indptr[:-1] + (lower.indices[lower.indptr[:-1]] == np.arange(n))
-    has_parent = first_below < lower.indptr[1:]
-    parents = lower.indices[first_below[has_parent]]
+    parents = _tree_parents(lower)
+    has_parent = parents >= 0
     indptr = np.concatenate([[0], np.cumsum(has_parent)])
-    return sp.csc_matrix((np.ones(len(parents)), parents, indptr), shape=(n, n))
+    return sp.csc_matrix((np.ones(int(has_parent.sum())), parents[has_parent], indptr), shape=(n, n))
 
 
 def _ancestors(graph: sp.csc_matrix, sources: np.ndarray) -> np.ndarray:
