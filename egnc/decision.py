@@ -11,7 +11,8 @@ So the decision is made on least-squares maps instead, in rounds:
 2. An accepted loop closure whose squared whitened residual `r^2` exceeds `chi2.ppf(q, d)` is
    rejected: it disagrees with the map even though it helped shape it.
 3. Rejected loop closures are re-admitted by their innovation statistic
-   `e^T (Omega^-1 + A H^-1 A^T)^-1 e` (`egnc.marginals`): how well the map built without them
+   `e^T (Omega^-1 + A H^-1 A^T)^-1 e` (`egnc.marginals`; `H` factorized by step 1's last step,
+   `round_information`): how well the map built without them
    predicts their measurements, within the combined uncertainty of both (the residual alone,
    `r^2`, ignores how uncertain the relative pose of two far-apart poses is). If the map agrees
    with *all* rejected loops, conditioned one on another, at `chi2.ppf(q_readmit, d)`, all
@@ -86,6 +87,24 @@ MAX_ROUNDS = 5
 READMIT_BATCH = 64
 """Rejected loops whose innovation statistics are computed together (one multi-column solve)."""
 
+REUSED_DAMPING = 1e-6
+"""Re-admission takes the information's factorization from the round's last least-squares step
+(`round_information`) when that step's LM damping, relative to the diagonal, is at most this."""
+
+
+def round_information(problem: Problem, refined: SolverResult) -> Factorization | None:
+    """The factorization of `problem`'s information that the last step of `refined` solved with,
+    where it can stand for the information at the solution; else None (factorize it afresh).
+
+    A solve that stopped on its cost test (status 1) took that step from the linearization just
+    before the solution and moved the poses by no more than the tolerance allows; its
+    factorization is of `H + lambda diag(H)` there, solved directly (no CG), with `lambda` at most
+    `REUSED_DAMPING`. Valid until `problem`'s backend factorizes again.
+    """
+    if refined.status != 1 or refined.step_damping > REUSED_DAMPING:
+        return None
+    return problem.step_solver.last_direct_factorization()
+
 
 def readmit_quantile(gnc_options: GncOptions, robust: np.ndarray) -> float:
     """The chi-square quantile of re-admission's test on a graph whose loop closures are `robust` `(E,)`.
@@ -104,7 +123,13 @@ def readmit_quantile(gnc_options: GncOptions, robust: np.ndarray) -> float:
 
 
 def readmitted(
-    problem: Problem, poses: np.ndarray, factors: BetweenFactors, rejected: np.ndarray, r: np.ndarray, quantile: float
+    problem: Problem,
+    poses: np.ndarray,
+    factors: BetweenFactors,
+    rejected: np.ndarray,
+    r: np.ndarray,
+    quantile: float,
+    information: Factorization | None = None,
 ) -> np.ndarray:
     """`(E,)` bool: the `rejected` edges that the map of `problem` agrees with.
 
@@ -122,6 +147,8 @@ def readmitted(
         rejected: `(E,)` bool, edges left out of `problem`.
         r: `(E,)` whitened residual norms at `poses`, to order the candidates.
         quantile: chi-square quantile of the test.
+        information: a factorization of `problem`'s information at `poses` (`round_information`);
+            None factorizes it here.
     """
     threshold = chi2_quantile(quantile, factors.information.shape[-1])
     # The innovation statistic is at most r^2 (its covariance adds the map's to the loop's own):
@@ -133,7 +160,7 @@ def readmitted(
     if not len(candidates):
         return passed
     try:
-        covariance_solve = covariance_solver(problem, poses)
+        covariance_solve = covariance_solver(problem, poses) if information is None else information
         estimate = ReachEstimate.of(problem)  # whether exporting the factor can pay (egnc.marginals)
         if _all_agree(problem, poses, factors, candidates, (covariance_solve, estimate), threshold):
             return rejected.copy()
@@ -394,7 +421,7 @@ def decide_outliers(
             # A loop the innovation test admitted is held to that test's quantile from then on
             # (module docstring, "Hysteresis").
             decided |= ever_readmitted & classify_inliers(r, robust, d, strict)
-            back = readmitted(problem, poses, factors, ~inliers, r, readmit_at)
+            back = readmitted(problem, poses, factors, ~inliers, r, readmit_at, round_information(problem, refined))
             ever_readmitted |= back
             decided = (decided & inliers) | back
         reports.append(least_squares_report(refined, started, int(inliers.sum()), "decision", start))

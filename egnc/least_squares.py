@@ -163,6 +163,8 @@ class SolverResult:
             and `"update"` (retraction, residuals and cost at the trial poses; an accepted
             step's residuals are reused).
         linear: direct solves, CG solves and iterations, CG fallbacks (`egnc.step_solver`).
+        step_damping: the LM damping `lambda` (relative to `H`'s diagonal) of the last accepted
+            step; 0 for Gauss-Newton and when no step was accepted.
     """
 
     poses: np.ndarray
@@ -176,6 +178,7 @@ class SolverResult:
     time_s: float
     timings: dict[str, float] = field(default_factory=dict)
     linear: LinearStatistics = field(default_factory=LinearStatistics)
+    step_damping: float = 0.0
 
     @property
     def converged(self) -> bool:
@@ -317,6 +320,7 @@ def solve_least_squares(
     history = [cost]
     damping, growth = options.initial_damping, 2.0
     iterations = linear_solves = 0
+    step_damping = 0.0
     status = 0 if np.isfinite(cost) else NUMERICAL_FAILURE
     data = gradient = None  # normal equations at T, built when a step from T is needed
     while status != NUMERICAL_FAILURE and iterations < options.max_iterations:
@@ -375,6 +379,7 @@ def solve_least_squares(
             status = 4
             break
         if use_damping:
+            step_damping = damping
             damping *= max(DAMPING_MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
             growth = 2.0
         previous = cost
@@ -399,4 +404,5 @@ def solve_least_squares(
         time_s=time.perf_counter() - started,
         timings=dict(clock.totals),
         linear=steps.statistics,
+        step_damping=step_damping,
     )

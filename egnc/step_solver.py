@@ -287,6 +287,7 @@ class StepSolver:
         self._data = np.empty(0)
         self._trusted: _TrustedSystem | None = None
         self._trusted_data = np.empty(0)
+        self._last_direct: Factorization | None = None
 
     def start_solve(self) -> None:
         """Begin a nonlinear solve: reset the statistics and forget the trusted patterns, so that
@@ -320,6 +321,7 @@ class StepSolver:
         """
         self._data = data
         self._trusted = None
+        self._last_direct = None
         if method == "auto" and trusted is not None:
             self._trusted = None if trusted.all() else self._given_system(trusted)
         elif method == "auto":
@@ -349,7 +351,15 @@ class StepSolver:
         self.statistics.direct_solves += 1
         damped = self._data.copy()
         damped[self.pattern.diagonal_slots] += shift
-        return self.direct_solver.solve(damped, rhs)
+        self._last_direct = self.direct_solver.factorize(damped)
+        return self._last_direct(rhs)
+
+    def last_direct_factorization(self) -> Factorization | None:
+        """The factorization of `H + diag(shift)` (this linearization's `H`) that the last `solve`
+        computed directly, or None where it went through CG or no step was solved since
+        `set_system`. Valid until this solver's backend factorizes again (it factorizes in place).
+        """
+        return self._last_direct
 
     def trusted_factorization(self, products: np.ndarray, trusted: np.ndarray) -> Factorization | None:
         """The factorization of `H_T`, the sum of exactly the `trusted` `(E,)` edges' `products`

@@ -14,15 +14,24 @@ import egnc.decision as decision_module
 import egnc.marginals as marginals_module
 from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import MAX_ROUNDS, decide_outliers, readmit_quantile, sequentially_consistent, truncated_cost
+from egnc.decision import (
+    MAX_ROUNDS,
+    REUSED_DAMPING,
+    decide_outliers,
+    readmit_quantile,
+    round_information,
+    sequentially_consistent,
+    truncated_cost,
+)
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import START_OPTIONS, GncOptions
 from egnc.graph import PoseGraph
 from egnc.io import read_irl
 from egnc.kernels import chi2_quantile
-from egnc.least_squares import Problem, SolverOptions
+from egnc.least_squares import Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import cholmod_available
 from egnc.marginals import innovations, pose_covariances, relative_covariances
+from egnc.normal_equations import edge_products
 
 GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
 """The decision from the initial guess alone."""
@@ -282,7 +291,7 @@ def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch
     graph, robust = corrupted.graph, corrupted.graph.is_loop_closure
     solved = []  # (classification, truncated cost at its least-squares map) of every round
 
-    def readmit_all(problem, poses, factors, rejected, r, quantile):
+    def readmit_all(problem, poses, factors, rejected, r, quantile, information=None):
         solved.append((~rejected, truncated_cost(r, robust, 3, 0.99)))
         return rejected
 
@@ -317,6 +326,47 @@ def test_covariances_solved_in_column_groups_equal_one_solve(monkeypatch):
     grouped = innovations(problem, poses, loops), pose_covariances(problem, poses, rows)
     for a, b in zip((*whole[0], whole[1]), (*grouped[0], grouped[1]), strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "backend",
+    ["scipy", pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse"))],
+)
+def test_a_rounds_last_step_factorization_gives_the_innovations_at_its_solution(backend):
+    # Re-admission reads the information's factorization off the round's last least-squares step,
+    # taken one tolerance-sized step before the solution with a tiny damping: the innovation
+    # covariances match those of the information factorized at the solution.
+    world = grid_world(2, 300, seed=8, noise_scale=0.5)
+    graph = world.graph
+    left_out = np.zeros(graph.num_edges, dtype=bool)
+    left_out[np.flatnonzero(graph.is_loop_closure)[:6]] = True
+    problem = Problem.from_graph(graph.subgraph_edges(~left_out), backend)
+    refined = solve_least_squares(problem, to_matrices(2, graph.poses), None, SolverOptions())
+    assert refined.status == 1 and refined.step_damping <= REUSED_DAMPING
+    information = round_information(problem, refined)
+    assert information is not None
+    loops = BetweenFactors.from_graph(graph.subgraph_edges(left_out))
+    e, reused = innovations(problem, refined.poses, loops, information)
+    _, fresh = innovations(problem, refined.poses, loops)  # factorizes at the solution, in place
+    np.testing.assert_allclose(reused, fresh, rtol=0, atol=1e-7 * np.abs(fresh).max())
+    joint = [float(e.ravel() @ np.linalg.solve(S, e.ravel())) for S in (reused, fresh)]
+    assert joint[0] == pytest.approx(joint[1], rel=1e-6)  # the statistic re-admission tests
+
+
+def test_a_round_that_did_not_stop_on_its_cost_test_factorizes_afresh():
+    world = grid_world(2, 100, seed=8, noise_scale=0.5)
+    problem = Problem.from_graph(world.graph)
+    start = to_matrices(2, world.graph.poses)
+    limited = solve_least_squares(problem, start, None, SolverOptions(max_iterations=1))
+    assert limited.status == 0 and round_information(problem, limited) is None
+    converged = solve_least_squares(problem, start, None, SolverOptions())
+    assert round_information(problem, converged) is problem.step_solver.last_direct_factorization() is not None
+    damped = dataclasses.replace(converged, step_damping=10 * REUSED_DAMPING)
+    assert round_information(problem, damped) is None
+    factors, weights = problem.factors, np.ones(len(problem.factors.edges))
+    products = edge_products(factors.linearize(converged.poses), factors.information, weights)
+    problem.step_solver.set_system(problem.pattern.scatter(products)[0], products, weights, "direct")
+    assert problem.step_solver.last_direct_factorization() is None  # a new linearization forgets it
 
 
 def test_the_bounds_that_spare_covariance_solves_hold():
