@@ -422,6 +422,7 @@ def decide_outliers(
             # (module docstring, "Hysteresis").
             decided |= ever_readmitted & classify_inliers(r, robust, d, strict)
             back = readmitted(problem, poses, factors, ~inliers, r, readmit_at, round_information(problem, refined))
+            problem.step_solver.discard_factorization()  # not held while the next round builds its problem
             ever_readmitted |= back
             decided = (decided & inliers) | back
         reports.append(least_squares_report(refined, started, int(inliers.sum()), "decision", start))

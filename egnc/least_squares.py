@@ -325,6 +325,7 @@ def solve_least_squares(
     data = gradient = None  # normal equations at T, built when a step from T is needed
     while status != NUMERICAL_FAILURE and iterations < options.max_iterations:
         if data is None or gradient is None:  # always set and cleared together
+            steps.discard_factorization()
             with clock("linearize"):
                 linearization = factors.linearize(T, errors)  # reuses the residuals at T
             with clock("assemble"):

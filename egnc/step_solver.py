@@ -351,15 +351,22 @@ class StepSolver:
         self.statistics.direct_solves += 1
         damped = self._data.copy()
         damped[self.pattern.diagonal_slots] += shift
+        self._last_direct = None  # never two factorizations held at once (SuperLU's are new objects)
         self._last_direct = self.direct_solver.factorize(damped)
         return self._last_direct(rhs)
 
     def last_direct_factorization(self) -> Factorization | None:
         """The factorization of `H + diag(shift)` (this linearization's `H`) that the last `solve`
-        computed directly, or None where it went through CG or no step was solved since
-        `set_system`. Valid until this solver's backend factorizes again (it factorizes in place).
+        computed directly, or None where it went through CG, no step was solved since
+        `set_system`, or it was discarded. Valid until this solver's backend factorizes again (it
+        factorizes in place).
         """
         return self._last_direct
+
+    def discard_factorization(self) -> None:
+        """Let the last direct factorization go, before the arrays of a new linearization are built
+        (a SuperLU factorization is a new object each time; held on, it would add to the peak)."""
+        self._last_direct = None
 
     def trusted_factorization(self, products: np.ndarray, trusted: np.ndarray) -> Factorization | None:
         """The factorization of `H_T`, the sum of exactly the `trusted` `(E,)` edges' `products`

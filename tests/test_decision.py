@@ -367,6 +367,10 @@ def test_a_round_that_did_not_stop_on_its_cost_test_factorizes_afresh():
     products = edge_products(factors.linearize(converged.poses), factors.information, weights)
     problem.step_solver.set_system(problem.pattern.scatter(products)[0], products, weights, "direct")
     assert problem.step_solver.last_direct_factorization() is None  # a new linearization forgets it
+    solve_least_squares(problem, start, None, SolverOptions(max_iterations=1))
+    assert problem.step_solver.last_direct_factorization() is not None
+    problem.step_solver.discard_factorization()
+    assert problem.step_solver.last_direct_factorization() is None
 
 
 def test_the_bounds_that_spare_covariance_solves_hold():
