@@ -321,7 +321,6 @@ class StepSolver:
         """
         self._data = data
         self._trusted = None
-        self._last_direct = None
         if method == "auto" and trusted is not None:
             self._trusted = None if trusted.all() else self._given_system(trusted)
         elif method == "auto":
@@ -356,10 +355,9 @@ class StepSolver:
         return self._last_direct(rhs)
 
     def last_direct_factorization(self) -> Factorization | None:
-        """The factorization of `H + diag(shift)` (this linearization's `H`) that the last `solve`
-        computed directly, or None where it went through CG, no step was solved since
-        `set_system`, or it was discarded. Valid until this solver's backend factorizes again (it
-        factorizes in place).
+        """The factorization of `H + diag(shift)` that the last `solve` computed directly, or None
+        where it went through CG or was discarded (`solve_least_squares` discards it before each
+        linearization). Valid until this solver's backend factorizes again (it factorizes in place).
         """
         return self._last_direct
 
