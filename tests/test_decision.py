@@ -35,6 +35,12 @@ from egnc.marginals import innovations, pose_covariances, relative_covariances
 GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
 """The decision from the initial guess alone."""
 
+FACTOR_BACKENDS = [
+    "scipy",
+    pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse")),
+]
+"""Backends the covariance tests run on."""
+
 OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, chordal_start=False, elimination_start=False)
 """The decision before re-admission and the other starts: the Geman-McClure classification at
 chi2.ppf(0.95), re-checked by r^2."""
@@ -143,10 +149,7 @@ def _dense_covariance(problem: Problem, poses: np.ndarray) -> tuple[np.ndarray, 
     return np.linalg.inv(J.T @ W @ J), free_index
 
 
-@pytest.mark.parametrize(
-    "backend",
-    ["scipy", pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse"))],
-)
+@pytest.mark.parametrize("backend", FACTOR_BACKENDS)
 def test_innovations_and_pose_covariances_match_a_dense_inverse(backend):
     world = grid_world(3, 40, seed=8, noise_scale=0.5)
     graph = world.graph
@@ -327,10 +330,7 @@ def test_covariances_solved_in_column_groups_equal_one_solve(monkeypatch):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
 
 
-@pytest.mark.parametrize(
-    "backend",
-    ["scipy", pytest.param("cholmod", marks=pytest.mark.skipif(not cholmod_available(), reason="no scikit-sparse"))],
-)
+@pytest.mark.parametrize("backend", FACTOR_BACKENDS)
 def test_a_rounds_last_step_factorization_gives_the_innovations_at_its_solution(backend):
     # Re-admission reads the information's factorization off the round's last least-squares step,
     # taken one tolerance-sized step before the solution with a tiny damping: the innovation
