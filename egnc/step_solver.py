@@ -22,12 +22,10 @@ one full factorization's time on sphere2500 with 50% false loops), or the truste
 pose unconstrained, the step is solved directly.
 
 The preconditioner's pattern, its fill-reducing order and its symbolic analysis are computed for
-the edges of weight at least `PATTERN_MARGIN * trust_weight`, and reused for every later trusted
-set of the same nonlinear solve that pattern contains (each of its edges enters the
-preconditioner with its current weight): as the map converges, loops come back into the trusted
-set a few hundred at a time, and an exact
-trusted set per analysis re-analysed the pattern 22 times in one stage on a 100 000-pose grid
-(1.5 s per analysis there: the block ordering and the pattern, more than CHOLMOD's symbolic step).
+the trusted edges of one linearization, and reused for every later trusted set of the same
+nonlinear solve that the pattern contains (each of its edges enters the preconditioner with its
+current weight). The pattern holds no edge below `trust_weight`: such an edge is mostly a
+switched-off false loop, and its fill-in is what the preconditioner exists to avoid.
 
 Reference:
     J. R. Shewchuk, "An Introduction to the Conjugate Gradient Method Without the Agonizing
@@ -65,14 +63,6 @@ _CACHED_TRUSTED_SETS = 2
 Each holds its last factorization: about 170 MiB on a 100 000-pose grid (BENCHMARKS.md, issue 18)."""
 _CACHED_GIVEN_SETS = 4
 """Analyses of given trusted sets kept across solves (`set_system(trusted=...)`)."""
-PATTERN_MARGIN = 1e-2
-"""A trusted pattern is analysed for the edges of weight at least `PATTERN_MARGIN * trust_weight`,
-and serves every later trusted set it contains: an edge must gain this factor in weight (its
-residual shrink by about 3 under Geman-McClure) to force a new analysis. A wider margin admits
-switched-off false loops' fill (1e-4 on city10000 at 50 % false loops: 3 analyses instead of 8,
-but 4x the factorization time); 1 is an analysis per distinct trusted set (BENCHMARKS.md)."""
-
-
 def dot(a: np.ndarray, b: np.ndarray) -> float:
     """`a . b` without BLAS: NumPy's OpenBLAS threads a long `dot`, and its worker then spins
     while CHOLMOD factorizes, which on 2 cores doubled the factorization time."""
@@ -84,8 +74,7 @@ class _TrustedSystem:
     """Pattern and solver of one trusted edge set, and where its unknowns sit in the full system.
 
     Attributes:
-        edges: `(E,)` bool, the edges of `pattern` (every edge of weight at least
-            `PATTERN_MARGIN * trust_weight` when it was analysed).
+        edges: `(E,)` bool, the edges of `pattern` (the trusted edges when it was analysed).
         pattern: normal-equations pattern of those edges, in its own fill-reducing order.
         solver: linear solver analysed for `pattern`.
         unknowns: `(n,)` full-system index of each trusted-system unknown.
@@ -326,7 +315,7 @@ class StepSolver:
         elif method == "auto":
             by_weight = weights >= trust_weight
             if not by_weight.all():
-                self._trusted = self._trusted_system(by_weight, weights >= PATTERN_MARGIN * trust_weight)
+                self._trusted = self._trusted_system(by_weight)
         if self._trusted is not None:
             self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
 
@@ -439,10 +428,9 @@ class StepSolver:
 
         return multiply
 
-    def _trusted_system(self, trusted: np.ndarray, margin: np.ndarray) -> _TrustedSystem | None:
-        """A cached analysis whose edges contain the `trusted` `(E,)` edges, else one analysed for the
-        `margin` `(E,)` edges (a superset); None when those leave a pose unconstrained (they cannot
-        precondition then).
+    def _trusted_system(self, trusted: np.ndarray) -> _TrustedSystem | None:
+        """A cached analysis whose edges contain the `trusted` `(E,)` edges, else one analysed for
+        them; None when they leave a pose unconstrained (they cannot precondition then).
 
         The preconditioner is then every edge of the pattern with its current weight: a split
         `H = H_P + H_rest` for any edge set `P` that keeps `H_P` positive definite leaves CG exact.
@@ -451,9 +439,9 @@ class StepSolver:
             if not np.any(trusted & ~system.edges):
                 self._trusted_systems.move_to_end(key)
                 return system
-        analysed = self._analysed_system(margin)
+        analysed = self._analysed_system(trusted)
         if analysed is not None:
-            self._trusted_systems[np.packbits(margin).tobytes()] = analysed
+            self._trusted_systems[np.packbits(trusted).tobytes()] = analysed
             if len(self._trusted_systems) > _CACHED_TRUSTED_SETS:
                 self._trusted_systems.popitem(last=False)
         return analysed

@@ -13,7 +13,6 @@ from egnc.kernels import make_kernel
 from egnc.least_squares import Problem, SolverOptions
 from egnc.linear_solvers import cholmod_available, rslab_available
 from egnc.normal_equations import edge_products
-from egnc.step_solver import PATTERN_MARGIN
 
 BACKENDS = [
     "scipy",
@@ -116,31 +115,30 @@ def test_linear_method_options_are_checked():
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_a_growing_trusted_set_reuses_the_analysis_that_contains_it(corrupted, backend):
+def test_a_trusted_set_inside_an_analysed_one_reuses_it_and_no_other_does(corrupted, backend):
     graph = corrupted.graph
     steps, data, gradient, products, weights, shift, direct = damped_system_and_direct_step(graph, backend)
     trust = 1e-4
     loops = np.flatnonzero(graph.is_loop_closure)
-    margin = PATTERN_MARGIN * trust
-    untrusted = loops[weights[loops] < trust]
-    below, within = untrusted[:3], untrusted[3:]  # below the margin, and within it
+    trusted_loops, untrusted_loops = loops[weights[loops] >= trust], loops[weights[loops] < trust]
+    assert len(trusted_loops) >= 3 and len(untrusted_loops)
     weights = weights.copy()
-    weights[below] = 0.1 * margin
-    weights[within] = np.maximum(weights[within], margin)
-    assert len(within)
-    # the first trusted set, then one grown by loops already inside its pattern's margin: one analysis
-    for grown in (False, True):
-        moved = weights.copy()
-        if grown:
-            moved[within] = trust  # trusted now, and still in the first pattern
+    weights[untrusted_loops[0]] = 0.5 * trust  # just below the trust weight
+
+    def step_with(moved: np.ndarray) -> None:
         steps.set_system(data, products, moved, "auto", trust_weight=trust)
-        step = steps.solve(shift, gradient)
-        np.testing.assert_allclose(step, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+        np.testing.assert_allclose(steps.solve(shift, gradient), direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+
+    step_with(weights)
+    # a trusted set inside the analysed one (loops that lost their trust): the same analysis
+    shrunk = weights.copy()
+    shrunk[trusted_loops[:3]] = 0.1 * trust
+    step_with(shrunk)
     assert steps.analyses == 1 and steps.statistics.cg_fallbacks == 0
-    # a loop that climbs from below the margin into the trusted set needs a new analysis
-    moved[below[0]] = trust
-    steps.set_system(data, products, moved, "auto", trust_weight=trust)
-    np.testing.assert_allclose(steps.solve(shift, gradient), direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+    # the loop that was just below the trust weight was not in the pattern: it needs a new one
+    grown = weights.copy()
+    grown[untrusted_loops[0]] = trust
+    step_with(grown)
     assert steps.analyses == 2
 
 
