@@ -13,7 +13,7 @@ import numpy as np
 
 from egnc.checks import check_callable, check_choice, check_instance
 from egnc.chordal import chordal_initialization
-from egnc.decision import Decision, StartContext, truncated_cost
+from egnc.decision import Decision, StartContext, lower_by_more_than_rounding, truncated_cost
 from egnc.diagnostics import solve_warnings
 from egnc.elimination import elimination_decision
 from egnc.errors import EgncError, GraphError, OptionError
@@ -405,8 +405,8 @@ def solve(
                 stages += reports
                 if other is not None:
                     candidates[name] = other
-        for name, candidate in candidates.items():  # a later start must be lower by more than rounding
-            if candidate.truncated_cost < candidates[start].truncated_cost * (1 - 1e-9):
+        for name, candidate in candidates.items():
+            if lower_by_more_than_rounding(candidate.truncated_cost, candidates[start].truncated_cost):
                 start = name
         decision = candidates[start]
         if start != first:

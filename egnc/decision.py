@@ -341,6 +341,12 @@ def truncated_cost(r: np.ndarray, robust: np.ndarray, d: int, quantile: float) -
     return 0.5 * float(np.sum(r2[~robust]) + np.sum(np.minimum(r2[robust], chi2_quantile(quantile, d))))
 
 
+def lower_by_more_than_rounding(candidate: float, incumbent: float) -> bool:
+    """Whether truncated cost `candidate` is below `incumbent` by more than a relative 1e-9: two
+    starts that reach the same decision differ by rounding only, and the incumbent stays."""
+    return candidate < incumbent * (1 - 1e-9)
+
+
 def least_squares_report(
     solved: SolverResult, started: float, active_edges: int, kind: StageKind, start: StageStart
 ) -> StageReport:

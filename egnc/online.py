@@ -77,7 +77,7 @@ from numpy.typing import ArrayLike
 from egnc.api import Result, decided_fields, solve
 from egnc.arrival import ConvergedMap, FirstStage
 from egnc.checks import check_bool, check_choice, check_float, check_instance, check_int, describe
-from egnc.decision import decide_outliers
+from egnc.decision import decide_outliers, lower_by_more_than_rounding
 from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
 from egnc.gnc import GncOptions, StageReport, classify_inliers
@@ -1040,8 +1040,9 @@ class OnlineSolver:
             decide: make the batch decision (`egnc.decision.decide_outliers`) on the current
                 estimate (least squares on the accepted edges, re-test, re-admission), and again
                 by `egnc.solve` on the whole graph from its odometry (`init="odometry"`); keep
-                the one of lower truncated cost (`egnc.decision.truncated_cost`), as `egnc.solve`
-                chooses between its two starts. The result's poses are that
+                the batch one only where its truncated cost (`egnc.decision.truncated_cost`) is
+                lower by more than rounding (`lower_by_more_than_rounding`), as `egnc.solve`
+                chooses between its starts. The result's poses are that
                 decision's least-squares map. False: the current robust estimate and the
                 decision of `inliers`, at no cost.
 
@@ -1102,7 +1103,7 @@ class OnlineSolver:
             batch = self._batch_solve(sorted_graph, robust)
             stages += batch.stages
             disputed = robust & ~inliers & batch.inliers
-            if batch.truncated_cost < decision.truncated_cost:
+            if lower_by_more_than_rounding(batch.truncated_cost, decision.truncated_cost):
                 note = (
                     f"; decision from the batch solve of the whole graph (truncated cost {batch.truncated_cost:.6g},"
                     f" against {decision.truncated_cost:.6g} from the online estimate)"

@@ -606,6 +606,24 @@ def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
     assert kept.start == "online" and kept.rejected_edges.tolist() == [false]
 
 
+def test_result_keeps_the_online_decision_where_the_batch_one_is_lower_by_rounding_only(monkeypatch):
+    # Both starts reach the same decision; the online one is made to cost a relative 1e-12 more
+    # (rounding), and it stays.
+    solver, information = _chain("egnc")
+    false = solver.add_loop(0, 10, [7.0, 0.0, 0.0], information)
+    solver.add_loop(0, 10, [10.0, 0.0, 0.0], information)
+    solver.update()
+    decide = egnc.online.decide_outliers
+
+    def a_rounding_above(*args, **kwargs):
+        decision = decide(*args, **kwargs)
+        return replace(decision, truncated_cost=decision.truncated_cost * (1 + 1e-12))
+
+    monkeypatch.setattr(egnc.online, "decide_outliers", a_rounding_above)
+    kept = solver.result()
+    assert kept.start == "online" and kept.rejected_edges.tolist() == [false]
+
+
 def test_local_updates_reach_the_whole_map_estimate_and_solve_less():
     graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o")
     outcomes, loop_updates = {}, []
