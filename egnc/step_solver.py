@@ -63,6 +63,8 @@ _CACHED_TRUSTED_SETS = 2
 Each holds its last factorization: about 170 MiB on a 100 000-pose grid (BENCHMARKS.md, issue 18)."""
 _CACHED_GIVEN_SETS = 4
 """Analyses of given trusted sets kept across solves (`set_system(trusted=...)`)."""
+
+
 def dot(a: np.ndarray, b: np.ndarray) -> float:
     """`a . b` without BLAS: NumPy's OpenBLAS threads a long `dot`, and its worker then spins
     while CHOLMOD factorizes, which on 2 cores doubled the factorization time."""
