@@ -16,8 +16,13 @@ that false loops still bend is easy to recognise by the truncated least-squares 
 (`egnc.decision.truncated_cost`), the objective both decisions are judged by: an accepted loop
 pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 
-1. Classify every loop, trusted or not, at the chordal poses (`r^2 <= chi2.ppf(q, d)` accepted).
-2. If that is the guess's decision already, stop: nothing to compare.
+1. Classify every loop, trusted or not, at the chordal poses (`r^2 <= chi2.ppf(q, d)` accepted),
+   and add the loops the guess's decision accepts: this start is there to win back loops the
+   guess's basin rejected, and its rounds re-test every accepted loop anyway. (Classified alone,
+   the chordal poses drop the loops the guess's decision re-admitted above the threshold, and
+   the probe then looks cheaper than the decision from it ends once it re-admits them too:
+   BENCHMARKS.md, a 100 000-pose grid.)
+2. If that accepts no loop the guess's decision rejects, stop: nothing to win back.
 3. Probe: unless the chordal poses' truncated cost is more than `PROBE_GATE` times the
    guess's decision's (a map bent by false loops: 5-100x on the shared files with 10-50 % false
    loops), give the accepted edges `PROBE_ITERATIONS` least-squares iterations from the chordal
@@ -88,8 +93,8 @@ def chordal_decision(
             had not switched off (IRLS weight at least `SolverOptions.trust_weight`).
 
     Returns:
-        `(decision, reports)`: the chordal start's decision, or None where it stopped early (same
-        classification, gate, probe), and the reports of every solve run here (the probe and
+        `(decision, reports)`: the chordal start's decision, or None where it stopped early (no
+        loop to win back, gate, probe), and the reports of every solve run here (the probe and
         the rounds).
     """
     graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
@@ -98,7 +103,7 @@ def chordal_decision(
     if poses is None:  # a chordal system the backend cannot factorize: no second start
         return None, ()
     r = factors.whitened_norms(factors.residuals(poses))
-    inliers = classify_inliers(r, robust, d, gnc_options)
+    inliers = classify_inliers(r, robust, d, gnc_options) | to_beat.inliers
     if (
         np.array_equal(inliers, to_beat.inliers)
         or truncated_cost(r, robust, d, q) > PROBE_GATE * to_beat.truncated_cost
