@@ -21,7 +21,7 @@ pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
    guess's basin rejected, and its rounds re-test every accepted loop anyway. (Classified alone,
    the chordal poses drop the loops the guess's decision re-admitted above the threshold, and
    the probe then looks cheaper than the decision from it ends once it re-admits them too:
-   BENCHMARKS.md, a 100 000-pose grid.)
+   BENCHMARKS.md, "The chordal start tries to win back loops only".)
 2. If that accepts no loop the guess's decision rejects, stop: nothing to win back.
 3. Probe: unless the chordal poses' truncated cost is more than `PROBE_GATE` times the
    guess's decision's (a map bent by false loops: 5-100x on the shared files with 10-50 % false
