@@ -93,10 +93,11 @@ class GncOptions:
             rows apart, so a drifted guess does not decide which basin the stage settles in.
             Where that start's decision rejects a whole run, the GNC stage also runs from the
             guess, and the decision of lower truncated cost is kept.
-        chordal_start: with `refine`, decide a second time from the chordal initialization
-            (which does not read the initial guess) and keep the decision of lower truncated
-            least-squares cost (`egnc.starts`): from a drifted guess the GNC stage can settle in a
-            wrong basin that the decision rounds confirm.
+        chordal_start: with `refine`, where the chordal initialization (which does not read
+            the initial guess) accepts loops that the first decision rejects, decide a second
+            time from there with those loops added to the first decision's, and keep the
+            decision of lower truncated least-squares cost (`egnc.starts`): from a drifted guess
+            the GNC stage can settle in a wrong basin that the decision rounds confirm.
         chordal_all_start: with `refine`, where the best decision so far rejects a few loops,
             run the GNC stage again from the chordal initialization of every edge and decide
             from there, if that map fits better than the initial guess (`egnc.starts`), and keep
