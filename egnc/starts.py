@@ -19,9 +19,10 @@ pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 1. Classify every loop, trusted or not, at the chordal poses (`r^2 <= chi2.ppf(q, d)` accepted),
    and add the loops the guess's decision accepts: this start is there to win back loops the
    guess's basin rejected, and its rounds re-test every accepted loop anyway. (Classified alone,
-   the chordal poses drop the loops the guess's decision re-admitted above the threshold, and
-   the probe then looks cheaper than the decision from it ends once it re-admits them too:
-   BENCHMARKS.md, "The chordal start tries to win back loops only".)
+   the chordal poses dropped the loops the guess's decision had re-admitted above the
+   threshold; the probe then looked cheaper than that decision, and the rounds from it
+   re-admitted them and ended above it: BENCHMARKS.md, "The chordal start tries to win back
+   loops only".)
 2. If that accepts no loop the guess's decision rejects, stop: nothing to win back.
 3. Probe: unless the chordal poses' truncated cost is more than `PROBE_GATE` times the
    guess's decision's (a map bent by false loops: 5-100x on the shared files with 10-50 % false
