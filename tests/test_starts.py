@@ -9,6 +9,7 @@ import pytest
 
 import egnc
 from egnc.api import marginal_covariances, solve
+from egnc.bench.cases import least_squares_optimum
 from egnc.cli.report import summary
 from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import Decision, StartContext, truncated_cost
@@ -75,6 +76,21 @@ def test_false_loops_keep_the_decision_of_the_first_start():
         assert "probe" not in [stage.kind for stage in result.stages]
         first_only = dataclasses.replace(GUESS_ONLY, runs_start=options.runs_start)
         np.testing.assert_array_equal(result.graph.poses, solve(corrupted.graph, gnc_options=first_only).graph.poses)
+
+
+def test_the_chordal_start_wins_back_a_true_loop_after_the_runs_start(dataset_path):
+    # kitti_00 with 10 % false loops (seed 1): the runs start's decision rejects one true loop;
+    # the chordal map accepts it, the decision to beat's loops are added, and that decision wins.
+    graph = egnc.read_g2o(dataset_path("kitti_00.g2o"))
+    reference = least_squares_optimum(graph, "auto").graph.poses
+    corrupted = add_false_loops(graph, 10, seed=1, reference_poses=reference)
+    robust = corrupted.graph.is_loop_closure
+    result = solve(corrupted.graph)
+    without = solve(corrupted.graph, gnc_options=GncOptions(chordal_start=False))
+    assert result.start == "chordal"
+    np.testing.assert_array_equal(robust & ~result.inliers, corrupted.is_outlier)
+    assert np.count_nonzero(robust & ~without.inliers & ~corrupted.is_outlier) == 1
+    assert result.truncated_cost < without.truncated_cost
 
 
 def test_least_squares_rejects_nothing_and_its_covariances_use_every_edge():
