@@ -48,8 +48,11 @@ increasing `r^2`, in batches of `READMIT_BATCH`; testing stops at the first batc
 (the all-agree test starts from the largest residuals and stops at the first batch that fails, or
 before it when its largest loop alone rules it out, `_all_agree`),
 and before solving a batch of which a bound that needs no covariance says none can pass
-(`_statistic_floor`). So a graph with thousands of gross false loops pays for one or two
-batches of marginal covariances per round, not thousands.
+(`_statistic_floor`). Where that bound leaves only a few loops of a batch (`SCOUT_LOOPS`), those
+are tested alone first and the batch is solved only if one of them passes: a batch admits no
+loop unless one passes alone. So a graph with thousands of gross false loops pays for one or two
+batches of marginal covariances per round, not thousands, and a round that confirms the
+classification mostly for a few columns' solve.
 
 References:
     M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data
@@ -86,6 +89,10 @@ MAX_ROUNDS = 5
 
 READMIT_BATCH = 64
 """Rejected loops whose innovation statistics are computed together (one multi-column solve)."""
+
+SCOUT_LOOPS = 8
+"""A batch in which at most this many loops can pass alone by `_statistic_floor` is first tested
+on those loops alone: where none passes, neither does the batch, and its solve is skipped."""
 
 REUSED_DAMPING = 1e-6
 """Re-admission takes the information's factorization from the round's last least-squares step
@@ -168,8 +175,13 @@ def readmitted(
         floor = floor[np.searchsorted(np.sort(candidates), candidates)]  # in candidate order
         for start in range(0, len(candidates), READMIT_BATCH):
             batch = candidates[start : start + READMIT_BATCH]
-            if np.all(floor[start : start + READMIT_BATCH] > threshold):
+            may_pass = floor[start : start + READMIT_BATCH] <= threshold
+            if not may_pass.any():
                 break  # none passes alone, so none passes: no solve needed
+            scout = batch[may_pass]
+            if len(scout) <= SCOUT_LOOPS and len(scout) < len(batch):
+                if not _any_passes_alone(problem, poses, factors, scout, (covariance_solve, estimate), threshold):
+                    break  # the loops that could pass alone do not: none passes
             e, S, own = _batch_innovations(problem, poses, factors, batch, (covariance_solve, estimate))
             ok = sequentially_consistent(e, credited_covariance(S, own), threshold)
             if not ok.any():
@@ -271,6 +283,31 @@ def map_credit(relative: np.ndarray, own: np.ndarray) -> np.ndarray:
     return np.minimum(1.0, own_trace / np.maximum(relative_trace, np.finfo(float).tiny))
 
 
+def _any_passes_alone(
+    problem: Problem,
+    poses: np.ndarray,
+    factors: BetweenFactors,
+    loops: np.ndarray,
+    covariance: tuple[Factorization, ReachEstimate | None],
+    threshold: float,
+) -> bool:
+    """Whether some loop of `loops` `(K,)` has a credited innovation statistic alone within `threshold`.
+
+    A loop's block of `credited_covariance` depends on that loop only, so this is the statistic
+    `sequentially_consistent` tests it by while nothing of its batch is admitted, in any batch.
+    """
+    e, S, own = _batch_innovations(problem, poses, factors, loops, covariance)
+    return bool(np.any(_block_statistics(e, credited_covariance(S, own)) <= threshold))
+
+
+def _block_statistics(e: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """`(K,)` `e_k^T S_kk^-1 e_k` of residuals `e` `(K, d)` with the diagonal blocks of `S` `(K d, K d)`."""
+    num_loops, d = e.shape
+    block = np.arange(num_loops)[:, None] * d + np.arange(d)
+    S_kk = S[block[:, :, None], block[:, None, :]]
+    return np.einsum("ki,ki->k", e, np.linalg.solve(S_kk, e[:, :, None])[:, :, 0])
+
+
 def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> np.ndarray:
     """`(K,)` bool: loops admitted one at a time while each agrees with the map and those before it.
 
@@ -288,8 +325,7 @@ def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> n
     """
     num_loops, d = e.shape
     block = np.arange(num_loops)[:, None] * d + np.arange(d)
-    S_kk = S[block[:, :, None], block[:, None, :]]
-    alone = np.einsum("ki,ki->k", e, np.linalg.solve(S_kk, e[:, :, None])[:, :, 0])
+    alone = _block_statistics(e, S)
     admitted = np.zeros(num_loops, dtype=bool)
     joint = 0.0
     for k in np.argsort(alone, kind="stable"):  # at most READMIT_BATCH small dense solves

@@ -395,6 +395,48 @@ def test_the_bounds_that_spare_covariance_solves_hold():
     assert np.any(floor > chi2_quantile(0.9999, d))  # the floor does spare false loops
 
 
+@pytest.mark.parametrize(("excess", "solved"), [(3.0, [1, 1]), (1.3, [1, 3, 64])])
+def test_a_batch_whose_only_possible_loops_fail_alone_is_not_solved(monkeypatch, excess, solved):
+    # Three true loops moved sideways to r^2 = `excess` x the threshold, left out with 50 % gross
+    # false loops: they lead the first batch, the only loops of it the covariance-free floor lets
+    # through. At 3x at most one is let through and fails alone, so the 64-loop batch is never
+    # solved; at 1.3x two pass alone and the batch is solved as before. The same loops come back
+    # either way as without the scout.
+    world = grid_world(2, 300, seed=11, noise_scale=0.5)
+    clean = solve(world.graph, "l2")
+    corrupted = add_false_loops(world.graph, 50, seed=12, reference_poses=clean.graph.poses)
+    moved = np.flatnonzero(corrupted.graph.is_loop_closure & ~corrupted.is_outlier)[[3, 9, 15]]
+    left_out = corrupted.is_outlier.copy()
+    left_out[moved] = True
+    kept = corrupted.graph.subgraph_edges(~left_out)
+    poses = to_matrices(2, solve(kept, "l2").graph.poses)
+    threshold = chi2_quantile(0.9999, 3)
+    g = corrupted.graph
+    measurements = g.measurements.copy()
+    measurements[moved, 1] += np.sqrt(excess * threshold / g.information[moved, 1, 1])
+    factors = BetweenFactors.from_graph(PoseGraph(2, g.vertex_ids, g.poses, g.edges, measurements, g.information))
+    r = factors.whitened_norms(factors.residuals(poses))
+    assert np.all(r[moved] ** 2 > threshold)  # none fits without its covariance
+    problem = Problem.from_graph(kept)
+    solved_loops: list[int] = []
+    batch_innovations = decision_module._batch_innovations
+
+    def counted(problem, poses, factors, batch, covariance):
+        solved_loops.append(len(batch))
+        return batch_innovations(problem, poses, factors, batch, covariance)
+
+    monkeypatch.setattr(decision_module, "_batch_innovations", counted)
+    scouted = decision_module.readmitted(problem, poses, factors, left_out, r, 0.9999)
+    assert solved_loops == solved
+    monkeypatch.setattr(decision_module, "SCOUT_LOOPS", 0)
+    solved_loops.clear()
+    unscouted = decision_module.readmitted(problem, poses, factors, left_out, r, 0.9999)
+    assert solved_loops == [1, 64]
+    np.testing.assert_array_equal(scouted, unscouted)
+    assert not np.any(scouted & corrupted.is_outlier)
+    assert np.count_nonzero(scouted) == (0 if excess == 3.0 else 2)
+
+
 def _chain_with_loops(
     scales: dict[tuple[int, int], float], errors: dict[tuple[int, int], float]
 ) -> tuple[PoseGraph, BetweenFactors, Problem, np.ndarray]:
