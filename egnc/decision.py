@@ -240,11 +240,13 @@ def _batch_innovations(
     factors: BetweenFactors,
     batch: np.ndarray,
     covariance: tuple[Factorization, ReachEstimate | None],
+    export: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Innovations `(K, d)`, their covariance `(K d, K d)` and the loops' own covariances `(K, d, d)`,
-    in edge order; `covariance`: the information's factorization and `ReachEstimate`."""
+    in edge order; `covariance`: the information's factorization and `ReachEstimate`; `export`:
+    whether the query may export the factor (`egnc.marginals.quadratic_form`)."""
     loops = factors.subset(np.sort(batch))
-    e, S = innovations(problem, poses, loops, *covariance)
+    e, S = innovations(problem, poses, loops, *covariance, export=export)
     return e, S, np.linalg.inv(loops.information)
 
 
@@ -295,8 +297,11 @@ def _any_passes_alone(
 
     A loop's block of `credited_covariance` depends on that loop only, so this is the statistic
     `sequentially_consistent` tests it by while nothing of its batch is admitted, in any batch.
+    The query does not export the factor (`egnc.marginals.quadratic_form`; it uses one already
+    exported): where the batch is then skipped nothing else would use it, and on the 3D grids the
+    copy set the robust solve's peak memory (BENCHMARKS.md, issue 18, twenty-second session).
     """
-    e, S, own = _batch_innovations(problem, poses, factors, loops, covariance)
+    e, S, own = _batch_innovations(problem, poses, factors, loops, covariance, export=False)
     return bool(np.any(_block_statistics(e, credited_covariance(S, own)) <= threshold))
 
 

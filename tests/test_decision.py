@@ -395,13 +395,16 @@ def test_the_bounds_that_spare_covariance_solves_hold():
     assert np.any(floor > chi2_quantile(0.9999, d))  # the floor does spare false loops
 
 
-@pytest.mark.parametrize(("excess", "solved"), [(3.0, [1, 1]), (1.3, [1, 3, 64])])
+@pytest.mark.parametrize(
+    ("excess", "solved"), [(3.0, [(1, True), (1, False)]), (1.3, [(1, True), (3, False), (64, True)])]
+)
 def test_a_batch_whose_only_possible_loops_fail_alone_is_not_solved(monkeypatch, excess, solved):
     # Three true loops moved sideways to r^2 = `excess` x the threshold, left out with 50 % gross
     # false loops: they lead the first batch, the only loops of it the covariance-free floor lets
     # through. At 3x at most one is let through and fails alone, so the 64-loop batch is never
     # solved; at 1.3x two pass alone and the batch is solved as before. The same loops come back
-    # either way as without the scout.
+    # either way as without the scout. The scout's query never exports the factor (the batch's,
+    # and the all-agree test's loop before it, may).
     world = grid_world(2, 300, seed=11, noise_scale=0.5)
     clean = solve(world.graph, "l2")
     corrupted = add_false_loops(world.graph, 50, seed=12, reference_poses=clean.graph.poses)
@@ -418,12 +421,12 @@ def test_a_batch_whose_only_possible_loops_fail_alone_is_not_solved(monkeypatch,
     r = factors.whitened_norms(factors.residuals(poses))
     assert np.all(r[moved] ** 2 > threshold)  # none fits without its covariance
     problem = Problem.from_graph(kept)
-    solved_loops: list[int] = []
+    solved_loops: list[tuple[int, bool]] = []
     batch_innovations = decision_module._batch_innovations
 
-    def counted(problem, poses, factors, batch, covariance):
-        solved_loops.append(len(batch))
-        return batch_innovations(problem, poses, factors, batch, covariance)
+    def counted(problem, poses, factors, batch, covariance, export=True):
+        solved_loops.append((len(batch), export))
+        return batch_innovations(problem, poses, factors, batch, covariance, export)
 
     monkeypatch.setattr(decision_module, "_batch_innovations", counted)
     scouted = decision_module.readmitted(problem, poses, factors, left_out, r, 0.9999)
@@ -431,7 +434,7 @@ def test_a_batch_whose_only_possible_loops_fail_alone_is_not_solved(monkeypatch,
     monkeypatch.setattr(decision_module, "SCOUT_LOOPS", 0)
     solved_loops.clear()
     unscouted = decision_module.readmitted(problem, poses, factors, left_out, r, 0.9999)
-    assert solved_loops == [1, 64]
+    assert solved_loops == [(1, True), (64, True)]
     np.testing.assert_array_equal(scouted, unscouted)
     assert not np.any(scouted & corrupted.is_outlier)
     assert np.count_nonzero(scouted) == (0 if excess == 3.0 else 2)

@@ -225,7 +225,7 @@ def test_the_reach_estimate_counts_the_entries_of_an_exact_factor_of_the_system(
 
 
 @CHOLMOD_ONLY
-def test_the_factor_is_exported_only_for_a_reach_the_estimate_lets_pay(monkeypatch):
+def test_the_factor_is_exported_only_for_a_query_that_may_and_a_reach_the_estimate_lets_pay(monkeypatch):
     graph = grid_world(2, 300, seed=5, noise_scale=0.5).graph
     left_out = np.zeros(graph.num_edges, dtype=bool)
     left_out[np.flatnonzero(graph.is_loop_closure)[::3]] = True
@@ -235,10 +235,10 @@ def test_the_factor_is_exported_only_for_a_reach_the_estimate_lets_pay(monkeypat
     whole = innovations(problem, poses, loops)[1]  # a small system: whole solves
     monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
     estimate = marginals_module.ReachEstimate.of(problem)
-    for share, exported in ((0.0, False), (1.0, True)):
+    for share, export, exported in ((0.0, True, False), (1.0, False, False), (1.0, True, True)):
         monkeypatch.setattr(marginals_module, "REACH_MAX_SHARE", share)
         covariance_solve = marginals_module.covariance_solver(problem, poses)
-        S = innovations(problem, poses, loops, covariance_solve, estimate)[1]
+        S = innovations(problem, poses, loops, covariance_solve, estimate, export)[1]
         assert (covariance_solve.triangular(build=False) is not None) == exported
         np.testing.assert_allclose(S, whole, rtol=1e-9, atol=1e-12)
 
