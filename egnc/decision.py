@@ -51,8 +51,8 @@ and before solving a batch of which a bound that needs no covariance says none c
 (`_statistic_floor`). Where that bound leaves only a few loops of a batch (`SCOUT_LOOPS`), those
 are tested alone first and the batch is solved only if one of them passes: a batch admits no
 loop unless one passes alone. So a graph with thousands of gross false loops pays for one or two
-batches of marginal covariances per round, not thousands, and a round that confirms the
-classification mostly for a few columns' solve.
+batches of marginal covariances per round, not thousands, and a round that only confirms the
+classification mostly pays for a few columns.
 
 References:
     M. Kaess, F. Dellaert, "Covariance recovery from a square root information matrix for data

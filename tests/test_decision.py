@@ -401,7 +401,7 @@ def test_the_bounds_that_spare_covariance_solves_hold():
 def test_a_batch_whose_only_possible_loops_fail_alone_is_not_solved(monkeypatch, excess, solved):
     # Three true loops moved sideways to r^2 = `excess` x the threshold, left out with 50 % gross
     # false loops: they lead the first batch, the only loops of it the covariance-free floor lets
-    # through. At 3x at most one is let through and fails alone, so the 64-loop batch is never
+    # through. At 3x one of them is let through and fails alone, so the 64-loop batch is never
     # solved; at 1.3x two pass alone and the batch is solved as before. The same loops come back
     # either way as without the scout. The scout's query never exports the factor (the batch's,
     # and the all-agree test's loop before it, may).
