@@ -91,8 +91,9 @@ READMIT_BATCH = 64
 """Rejected loops whose innovation statistics are computed together (one multi-column solve)."""
 
 SCOUT_LOOPS = 8
-"""A batch in which at most this many loops can pass alone by `_statistic_floor` is first tested
-on those loops alone: where none passes, neither does the batch, and its solve is skipped."""
+"""A batch in which at most this many loops, but not all, can pass alone by `_statistic_floor` is
+first tested on those loops alone: where none passes, neither does the batch, and its solve is
+skipped."""
 
 REUSED_DAMPING = 1e-6
 """Re-admission takes the information's factorization from the round's last least-squares step
