@@ -105,49 +105,52 @@ class NormalEquationsPattern:
         # Scalar column b of block column J holds d rows per block, except the diagonal block in
         # lower mode (the first block of its column), which holds rows b..d-1.
         skipped = np.arange(d) if lower_only else np.zeros(d, dtype=np.int64)
-        counts = np.diff(col_start)[:, None] * d - skipped
+        counts = (np.diff(col_start)[:, None] * d - skipped).ravel()
         indptr = np.zeros(size + 1, dtype=np.int64)
-        np.cumsum(counts.ravel(), out=indptr[1:])
+        np.cumsum(counts, out=indptr[1:])
         nnz = int(indptr[-1])
 
-        # slot[t, a, b]: data slot of scalar (a, b) of stored block t (unused where not stored). Scalar
-        # column b of block column J starts at indptr[J d + b]; block t of rank k sits k d rows into
-        # it, less the b rows a lower-stored diagonal block (k = 0) skips above its diagonal.
-        a, b = np.arange(d)[:, None], np.arange(d)[None, :]
-        start = indptr[block_col[:, None] * d + b[0]] + rank[:, None] * d - skipped  # (blocks, d)
-        slot = start[:, None, :] + a  # (blocks, d, d)
-        indices = np.empty(nnz, dtype=np.int64)
-        row_of = block_row[:, None, None] * d + a  # (blocks, d, 1): the row of scalar (a, b)
-        if lower_only:  # every scalar is stored but those above the diagonal of a diagonal block (k = 0)
-            first, below = rank == 0, a >= b
-            indices[slot[~first]] = row_of[~first]
-            first_rows = np.broadcast_to(row_of[first], (int(np.count_nonzero(first)), d, d))
-            indices[slot[first][:, below]] = first_rows[:, below]
-        else:  # every scalar stored: no mask to gather through
-            indices[slot] = row_of
+        # Every scalar column of block column J lists the rows of J's blocks in key order
+        # (`block_rows`), less its first b rows in lower mode: gathered, not scattered per block.
+        a = np.arange(d)
+        block_rows = (block_row[:, None] * d + a).ravel()
+        source_start = (col_start[:-1, None] * d + skipped).ravel()
+        positions = np.repeat(source_start - indptr[:-1], counts)
+        positions += np.arange(nnz)
+        indices = block_rows[positions]
+        del positions
+
+        # Scalar (a, b) of stored block t sits at data slot start[t, b] + a: scalar column b of its
+        # block column starts at indptr[J d + b], and block t of rank k sits k d rows into it, less
+        # the b rows a lower-stored diagonal block (k = 0) skips above its diagonal.
+        start = indptr[block_col[:, None] * d + a] + rank[:, None] * d - skipped  # (blocks, d)
+        diagonal = np.flatnonzero(block_col == block_row)  # one per free pose, in order
+        diagonal_slots = (start[diagonal] + a).ravel()
 
         # Where each scalar of P = [J_i | J_j]^T W [J_i | J_j | e] goes: the (d, d) sub-block of
         # rows `row_side` and columns `col_side` of P is the stored block of (row pose, column
-        # pose), copied whole (its unstored scalars, or all of it when the block is not stored,
-        # go to the discard slot: the last block of `block_slots`). Rows of the last column are
-        # the gradient of the row pose.
+        # pose), copied whole; its unstored scalars, or all of it when the block is not stored, go
+        # to the discard slot. Rows of the last column are the gradient of the row pose.
         discard = nnz + size
-        diagonal = np.flatnonzero(block_col == block_row)  # one per free pose, in order
-        diagonal_slots = slot[diagonal][:, np.arange(d), np.arange(d)].ravel()
-        block_slots = np.concatenate((slot, np.full((1, d, d), discard, dtype=np.int64)))  # (blocks + 1, d, d)
-        del slot  # the slots of P below are the largest array here
-        if lower_only:
-            block_slots[:-1][first] = np.where(below, block_slots[:-1][first], discard)
-        slots = np.empty((len(var), 2 * d, 2 * d + 1), dtype=np.int64)
-        for row_side in range(2):
-            for col_side in range(2):
-                rv, cv = var[:, row_side], var[:, col_side]
-                kept = (rv >= 0) & (cv >= 0) & ((rv >= cv) if lower_only else True)
-                query = np.where(kept, cv * stride + rv, -1)
-                found = np.where(kept, np.searchsorted(block_keys, query), len(block_keys))
-                assert np.array_equal(block_keys[found[kept]], query[kept]), "pattern misses a block"
-                rows, cols = slice(row_side * d, (row_side + 1) * d), slice(col_side * d, (col_side + 1) * d)
-                slots[:, rows, cols] = block_slots[found]
+        diagonal_table = np.full((num_free + 1, d, d), discard, dtype=np.int64)  # row -1: a fixed pose
+        diagonal_table[:-1] = start[diagonal][:, None, :] + a[:, None]
+        if lower_only:  # the scalars (a, b) above the diagonal, a < b, are not stored
+            above = np.triu_indices(d, 1)
+            diagonal_table[:, above[0], above[1]] = discard
+        slots = np.full((len(var), 2 * d, 2 * d + 1), discard, dtype=np.int64)
+        for side in range(2):  # a pose with itself: its diagonal block
+            side_rows = slice(side * d, (side + 1) * d)
+            slots[:, side_rows, side_rows] = diagonal_table[var[:, side]]
+        for row_side, col_side in ((0, 1), (1, 0)):  # the two poses of an edge: their off-diagonal block
+            rv, cv = var[:, row_side], var[:, col_side]
+            kept = np.flatnonzero((rv >= 0) & (cv >= 0) & ((rv >= cv) if lower_only else True))
+            query = cv[kept] * stride + rv[kept]
+            found = np.searchsorted(block_keys, query)
+            assert np.array_equal(block_keys[np.minimum(found, len(block_keys) - 1)], query), "pattern misses a block"
+            block = slots[:, row_side * d : (row_side + 1) * d, col_side * d : (col_side + 1) * d]
+            block[kept] = start[found][:, None, :] + a[:, None]
+            onto_itself = kept[rv[kept] == cv[kept]]  # an edge from a pose to itself: its diagonal block
+            block[onto_itself] = diagonal_table[rv[onto_itself]]
         row_var = var[:, np.arange(2 * d) // d]  # (E, 2d)
         slots[:, :, 2 * d] = np.where(row_var >= 0, nnz + row_var * d + np.arange(2 * d) % d, discard)
         return cls(size, indptr, indices, lower_only, slots, diagonal_slots, free_index)

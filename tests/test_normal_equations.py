@@ -91,6 +91,22 @@ def test_assembly_in_a_block_order_is_the_permuted_dense_system(d, lower_only):
     np.testing.assert_array_equal(pattern.free_index[free_rows[order]], np.arange(num_poses - 2))
 
 
+@pytest.mark.parametrize("lower_only", [False, True])
+def test_an_edge_from_a_pose_to_itself_assembles_as_dense(lower_only):
+    """Graphs reject such an edge, but the pattern's off-diagonal blocks must not assume it away:
+    both of its poses' blocks land in the one diagonal block."""
+    rng = np.random.default_rng(7 + lower_only)
+    edges, lin, information, weights = random_case(rng, 6, 3)
+    edges[-1] = [4, 4]
+    fixed = np.zeros(6, dtype=bool)
+    fixed[0] = True
+    pattern = NormalEquationsPattern.build(edges, fixed, 3, lower_only)
+    data, g = pattern.assemble(lin, information, weights)
+    H_ref, g_ref = dense_normal_equations(edges, fixed, 3, lin, information, weights)
+    np.testing.assert_allclose(to_dense(pattern, data), np.tril(H_ref) if lower_only else H_ref, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(g, g_ref, rtol=1e-12, atol=1e-10)
+
+
 def test_pattern_is_valid_csc():
     rng = np.random.default_rng(1)
     edges, *_ = random_case(rng, 12, 3)
