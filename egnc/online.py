@@ -64,7 +64,6 @@ References:
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -82,7 +81,7 @@ from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
 from egnc.gnc import GncOptions, StageReport, classify_inliers
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph, is_dim
-from egnc.io.atomic import atomic_binary_file
+from egnc.io.checkpoint import CHECKPOINT_VERSION, read_checkpoint, write_checkpoint
 from egnc.kernels import make_kernel
 from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import resolve_name
@@ -96,9 +95,6 @@ __all__ = ["ONLINE_METHODS", "OnlineOptions", "OnlineSolver", "UpdateReport"]
 
 ONLINE_METHODS = ("egnc", "risam")
 """Schedules the online solver graduates new loop closures with."""
-
-CHECKPOINT_VERSION = 1
-"""Format version written into every checkpoint; `OnlineSolver.load` refuses others."""
 
 _RESIDUAL_AT_REST = 1e-9
 """A new edge whose whitened residual is below this at the current estimate changes no optimum."""
@@ -1219,11 +1215,9 @@ class OnlineSolver:
             "update_iterations": np.array(self._update_iterations, dtype=np.int64),
         }
         try:
-            text = json.dumps(settings)
+            write_checkpoint(Path(path), settings, arrays)
         except (TypeError, ValueError) as error:
             raise OptionError(f"meta must hold only JSON data (dicts, lists, strings, numbers): {error}") from None
-        with atomic_binary_file(Path(path)) as out:
-            np.savez(out, settings=np.array(text), **arrays)  # type: ignore[arg-type]
 
     @classmethod
     def load(cls, path: str | Path) -> tuple[OnlineSolver, dict]:
@@ -1231,25 +1225,22 @@ class OnlineSolver:
 
         Raises:
             OptionError: `path` is not a file path.
-            EgncError: the file is not an egnc checkpoint of this version, or cannot be read.
+            EgncError: the file cannot be read, is not an egnc checkpoint of this version, or its
+                entries do not fit together (`egnc.io.checkpoint.read_checkpoint`).
         """
         check_instance("path", path, (str, os.PathLike), "a file path")
+        settings, arrays = read_checkpoint(Path(path))
         try:
-            with np.load(Path(path), allow_pickle=False) as data:
-                settings = json.loads(str(data["settings"]))
-                arrays = {name: data[name] for name in data.files if name != "settings"}
-        except (OSError, ValueError, KeyError) as error:
-            raise EgncError(f"{path}: not a readable egnc checkpoint ({error})") from None
-        if settings.get("version") != CHECKPOINT_VERSION:
-            raise EgncError(f"{path}: checkpoint version {settings.get('version')}, expected {CHECKPOINT_VERSION}")
-        solver = cls(
-            settings["dim"],
-            settings["method"],
-            linear_solver=settings["linear_solver"],
-            options=SolverOptions(**settings["options"]),
-            gnc_options=GncOptions(**settings["gnc_options"]),
-            online_options=OnlineOptions(**settings["online_options"]),
-        )
+            solver = cls(
+                settings["dim"],
+                settings["method"],
+                linear_solver=settings["linear_solver"],
+                options=SolverOptions(**settings["options"]),
+                gnc_options=GncOptions(**settings["gnc_options"]),
+                online_options=OnlineOptions(**settings["online_options"]),
+            )
+        except (EgncError, TypeError) as error:  # an unknown method or option, or options that are not a mapping
+            raise EgncError(f"{path}: invalid checkpoint settings ({error})") from None
         solver._vertex_ids = arrays["vertex_ids"]
         solver._row = {vertex_id: row for row, vertex_id in enumerate(solver._vertex_ids.tolist())}
         solver._known_ids = set(solver._row)

@@ -161,7 +161,7 @@ def replay(
             same_graph = saved["fingerprint"] == settings["fingerprint"]
             what = ", ".join(differs) if same_graph else "another graph or edge roles"
             raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
-        done = int(meta["steps_done"])
+        done = solver.steps  # one update per step
     if solver is None:
         solver = OnlineSolver(
             graph.dim,
@@ -182,7 +182,7 @@ def replay(
         if on_step is not None:
             on_step(done, len(steps), report)
         if path is not None and (done % checkpoint_every == 0 or done == last):
-            solver.save(path, meta={**settings, "steps_done": done})
+            solver.save(path, meta=settings)
     inserted = order[: solver.num_edges]
     result = _in_file_order(solver.result(), inserted, graph) if done == len(steps) else solver.result()
     update_ms = solver.update_ms

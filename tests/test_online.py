@@ -413,7 +413,7 @@ def test_save_and_load_keep_every_number(tmp_path):
         s.add_loop(1, 8, [7.2, 0.0, 0.0], information)
         s.update()
     np.testing.assert_array_equal(loaded.poses, solver.poses)
-    with pytest.raises(EgncError, match="not a readable"):
+    with pytest.raises(EgncError, match="cannot read the checkpoint"):
         OnlineSolver.load(tmp_path / "missing.npz")
 
 

@@ -1,0 +1,174 @@
+"""A damaged or inconsistent checkpoint is refused with one line naming the file (egnc.io.checkpoint)."""
+
+from __future__ import annotations
+
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import egnc
+from egnc.errors import EgncError
+from egnc.online import OnlineSolver
+from egnc.replay import replay
+
+DATA = Path(__file__).parents[1] / "datasets"
+
+
+def _first_poses(graph: egnc.PoseGraph, count: int) -> egnc.PoseGraph:
+    keep = (graph.edges < count).all(axis=1)
+    return egnc.PoseGraph(
+        dim=graph.dim,
+        vertex_ids=graph.vertex_ids[:count],
+        poses=graph.poses[:count],
+        edges=graph.edges[keep],
+        measurements=graph.measurements[keep],
+        information=graph.information[keep],
+    )
+
+
+@pytest.fixture(scope="module", params=["grid2d_outliers.g2o", "grid3d_outliers.g2o"])
+def checkpoint(request, tmp_path_factory) -> bytes:
+    """The bytes of a checkpoint of a replay of 40 poses with loop closures (2D, 3D)."""
+    path = tmp_path_factory.mktemp("checkpoint") / "state.npz"
+    replay(_first_poses(egnc.read_g2o(DATA / request.param), 40), "egnc", checkpoint=path)
+    return path.read_bytes()
+
+
+def _entries(blob: bytes) -> tuple[dict, dict[str, np.ndarray]]:
+    with np.load(io.BytesIO(blob)) as data:
+        arrays = {name: data[name] for name in data.files if name != "settings"}
+        return json.loads(str(data["settings"])), arrays
+
+
+def _write(path: Path, settings: object, arrays: dict[str, np.ndarray]) -> Path:
+    np.savez(path, settings=np.array(json.dumps(settings)), **arrays)  # type: ignore[arg-type]
+    return path
+
+
+def test_the_written_checkpoint_loads(checkpoint, tmp_path):
+    path = tmp_path / "state.npz"
+    path.write_bytes(checkpoint)
+    solver, meta = OnlineSolver.load(path)
+    assert solver.num_poses == 40 and "fingerprint" in meta
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda blob: b"", r"not an egnc checkpoint \(an empty file\)"),
+        (lambda blob: (DATA / "grid2d.g2o").read_bytes(), r"not an egnc checkpoint \(not a NumPy .npz archive\)"),
+        (lambda blob: blob[: len(blob) // 2], "damaged checkpoint"),
+        (lambda blob: blob[:200] + bytes(255 - b for b in blob[200:260]) + blob[260:], "damaged checkpoint"),
+    ],
+    ids=["empty", "a g2o file", "cut in half", "bytes overwritten"],
+)
+def test_a_damaged_file_is_one_error_naming_it(checkpoint, tmp_path, damage, message):
+    path = tmp_path / "state.npz"
+    path.write_bytes(damage(checkpoint))
+    with pytest.raises(EgncError, match=message) as error:
+        OnlineSolver.load(path)
+    assert str(error.value).startswith(str(path)) and "\n" not in str(error.value)
+
+
+def _not_rigid(arrays):
+    arrays["T"][3, 0, 0] = 2.0
+
+
+def _indefinite(arrays):
+    arrays["information"][1] *= -1.0
+
+
+def _edge_out_of_range(arrays):
+    arrays["edges"][2, 1] = len(arrays["vertex_ids"])
+
+
+def _repeated_id(arrays):
+    arrays["vertex_ids"][5] = arrays["vertex_ids"][4]
+
+
+def _nan_pose(arrays):
+    arrays["T_initial"][0, 0, 2] = np.nan
+
+
+def _mu_above_one(arrays):
+    arrays["mu"][-1] = 1.5
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda arrays: arrays.pop("Z_inv"), r"inconsistent checkpoint \(no Z_inv\)"),
+        (lambda arrays: arrays.update(r=arrays["r"][:-1]), r"r is float64 \(\d+,\), expected float \(\d+,\)"),
+        (lambda arrays: arrays.update(robust=arrays["robust"].astype(float)), "robust is float64"),
+        (lambda arrays: arrays.update(edges=np.array(3)), "edges is a single number"),
+        (_nan_pose, "T_initial holds a non-finite number"),
+        (_not_rigid, "T holds a matrix that is not a rigid transform"),
+        (_indefinite, "information holds a matrix that is not symmetric positive definite"),
+        (_edge_out_of_range, "edges name poses outside 0..39"),
+        (_repeated_id, "vertex_ids repeats an id"),
+        (_mu_above_one, r"mu is outside \[0, 1\]"),
+        (lambda arrays: arrays.update(update_ms=arrays["update_ms"][:-1]), "update_iterations is int64"),
+    ],
+    ids=["missing", "short", "retyped", "scalar", "nan", "not rigid", "indefinite", "edge range", "repeated id",
+         "mu", "steps"],  # fmt: skip
+)
+def test_arrays_that_do_not_fit_together_are_refused(checkpoint, tmp_path, change, message):
+    settings, arrays = _entries(checkpoint)
+    change(arrays)
+    path = _write(tmp_path / "state.npz", settings, arrays)
+    with pytest.raises(EgncError, match=message) as error:
+        OnlineSolver.load(path)
+    assert str(error.value).startswith(str(path))
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda settings: settings.update(version=0), "checkpoint version 0, expected 1"),
+        (lambda settings: settings.pop("gauge"), r"incomplete checkpoint \(settings without gauge\)"),
+        (lambda settings: settings.update(dim=4), "dim is 4, expected 2 or 3"),
+        (lambda settings: settings.update(steps=settings["steps"] + 1), r"steps is \d+, expected \d+"),
+        (lambda settings: settings.update(gauge=-1), "gauge is -1"),
+        (lambda settings: settings.update(meta=[1]), "meta is list"),
+        (lambda settings: settings.update(method="gnc"), r"invalid checkpoint settings \(.*method"),
+        (lambda settings: settings["options"].update(speed=2), r"invalid checkpoint settings \(.*speed"),
+        (lambda settings: settings.update(converged_poses=0), "converged_poses is 0"),
+    ],
+)
+def test_settings_that_do_not_fit_are_refused(checkpoint, tmp_path, change, message):
+    settings, arrays = _entries(checkpoint)
+    change(settings)
+    path = _write(tmp_path / "state.npz", settings, arrays)
+    with pytest.raises(EgncError, match=message):
+        OnlineSolver.load(path)
+
+
+def test_settings_that_are_not_a_json_object_are_refused(checkpoint, tmp_path):
+    _, arrays = _entries(checkpoint)
+    path = tmp_path / "state.npz"
+    np.savez(path, settings=np.array("{'version': 1"), **arrays)  # type: ignore[arg-type]
+    with pytest.raises(EgncError, match="its settings are not JSON"):
+        OnlineSolver.load(path)
+    _write(path, [1, 2], arrays)
+    with pytest.raises(EgncError, match="not a JSON object"):
+        OnlineSolver.load(path)
+
+
+def test_the_cli_refuses_an_empty_checkpoint_in_one_line_and_writes_nothing(tmp_path):
+    graph = tmp_path / "small.g2o"
+    egnc.write_g2o(_first_poses(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 30), graph)
+    state, out = tmp_path / "state.npz", tmp_path / "out.g2o"
+    state.write_bytes(b"")
+    run = subprocess.run(
+        [sys.executable, "-m", "egnc", str(graph), "--online", "--checkpoint", str(state), "-o", str(out), "-q"],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 1
+    assert run.stderr.strip().splitlines()[-1] == f"egnc-solve: error: {state}: not an egnc checkpoint (an empty file)"
+    assert "Traceback" not in run.stderr and not out.exists()
