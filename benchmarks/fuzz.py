@@ -1,4 +1,5 @@
-"""Fuzz egnc with seeded cases: mutated files (here), option values (`fuzz_options.py`), API misuse (`fuzz_api.py`).
+"""Fuzz egnc with seeded cases: mutated files (here), option values (`fuzz_options.py`), API misuse
+(`fuzz_api.py`), damaged checkpoints (`fuzz_checkpoints.py`).
 
 Files: each mutant is a small g2o or IRL text changed by one random operator (byte flips,
 truncation, deleted, repeated or swapped lines, swapped fields, huge, tiny and non-numeric numbers,
@@ -12,7 +13,7 @@ mark, TORO records, a 2 MiB line, FIX on every vertex and a deleted IRL header l
   must come back with the "nothing to optimize" status, not "converged";
 - nothing may be printed on stdout (file descriptor 1, so BLAS messages count too).
 
-`python benchmarks/fuzz.py [--target files|options|api|all] [--cases N] [--seed S]` prints the
+`python benchmarks/fuzz.py [--target files|options|api|checkpoints|all] [--cases N] [--seed S]` prints the
 outcomes by class as markdown tables (recorded in RELIABILITY.md) and exits 1 if any case is a
 bug (`bad`). `tests/test_fuzz.py` runs the same kind of cases, fewer.
 """
@@ -327,12 +328,14 @@ def counts_table(rows: dict[str, collections.Counter], columns: list[str], first
 
 def main(argv: list[str] | None = None) -> int:
     import fuzz_api
+    import fuzz_checkpoints
     import fuzz_options
 
     targets: dict[str, Callable[[int, int], tuple[str, int]]] = {
         "files": _files_target,
         "options": fuzz_options.run_target,
         "api": fuzz_api.run_target,
+        "checkpoints": fuzz_checkpoints.run_target,
     }
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--target", choices=[*targets, "all"], default="files", help="what to fuzz (default files)")

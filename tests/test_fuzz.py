@@ -1,9 +1,10 @@
-"""Seeded fuzzing (benchmarks/fuzz.py, fuzz_options.py, fuzz_api.py): a bounded quick version of each target.
+"""Seeded fuzzing (benchmarks/fuzz.py, fuzz_options.py, fuzz_api.py, fuzz_checkpoints.py): each target, quickly.
 
 Files: reading a mutant gives a `PoseGraph` or an `EgncError` (always the error for the invalid
 operators); solving an accepted one gives a result or an `EgncError`, a strict-JSON report, and
 nothing on stdout. Options: an invalid field value is refused at construction naming the field,
-valid ones solve. API: every misuse ends in a one-line `EgncError`. Nothing hangs.
+valid ones solve. API: every misuse ends in a one-line `EgncError`. Checkpoints: a damaged one is
+refused in one line naming the file, or resumes. Nothing hangs.
 `python benchmarks/fuzz.py --target all` runs more cases and prints the tables in RELIABILITY.md.
 """
 
@@ -18,6 +19,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
 import fuzz  # noqa: E402
 import fuzz_api  # noqa: E402
+import fuzz_checkpoints  # noqa: E402
 import fuzz_options  # noqa: E402
 
 CASES = 300
@@ -97,3 +99,10 @@ def _api_arguments(tmp_path: Path) -> tuple:
 
     graph = fuzz_api._graph()
     return graph, egnc.solve(graph, "l2"), tmp_path
+
+
+def test_checkpoint_fuzz_refuses_damage_in_one_line_naming_the_file_or_resumes(tmp_path):
+    results = fuzz_checkpoints.fuzz_checkpoints(200, SEED, tmp_path)
+    assert {case.operator for case in results} == set(fuzz_checkpoints.OPERATORS)
+    assert {case.dim for case in results} == {2, 3}
+    assert {case.outcome for case in results} == {"clean error", "resumed"}
