@@ -32,6 +32,7 @@ from egnc.checks import check_callable, check_instance, check_int
 from egnc.errors import EgncError, GraphError
 from egnc.gnc import GncOptions, known_inlier_mask
 from egnc.graph import PoseGraph
+from egnc.io.atomic import check_writable
 from egnc.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
 
@@ -124,7 +125,9 @@ def replay(
         on_step: called after every update with `(step, total_steps, report)`.
 
     Raises:
-        EgncError: the checkpoint belongs to another graph or other settings.
+        EgncError: the checkpoint belongs to another graph or other settings or cannot be read
+            (`OnlineSolver.load`), or, where it does not exist yet, cannot be written there
+            (checked before the first step).
         GraphError: a step adds a loop closure to a pose no earlier edge reached.
     """
     check_instance("graph", graph, PoseGraph)
@@ -150,6 +153,8 @@ def replay(
     solver: OnlineSolver | None = None
     done = 0
     path = None if checkpoint is None else Path(checkpoint)
+    if path is not None and not path.exists():
+        check_writable(path)  # before the first steps, not at the first save
     if path is not None and path.exists():
         solver, meta = OnlineSolver.load(path)
         # Checkpoints written before decide_at_arrival existed solved every update.

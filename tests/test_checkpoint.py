@@ -172,3 +172,11 @@ def test_the_cli_refuses_an_empty_checkpoint_in_one_line_and_writes_nothing(tmp_
     assert run.returncode == 1
     assert run.stderr.strip().splitlines()[-1] == f"egnc-solve: error: {state}: not an egnc checkpoint (an empty file)"
     assert "Traceback" not in run.stderr and not out.exists()
+
+
+def test_a_checkpoint_that_cannot_be_written_fails_before_the_first_step(tmp_path):
+    graph = _first_poses(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 30)
+    steps = []
+    with pytest.raises(EgncError, match=r"missing/state.npz: cannot write file: directory .*missing does not exist"):
+        replay(graph, "egnc", checkpoint=tmp_path / "missing" / "state.npz", on_step=lambda *step: steps.append(step))
+    assert steps == []

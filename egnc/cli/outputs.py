@@ -18,7 +18,7 @@ from egnc.api import Result
 from egnc.errors import EgncError
 from egnc.graph import PoseGraph
 from egnc.io import write_g2o
-from egnc.io.atomic import all_or_nothing, atomic_text_file
+from egnc.io.atomic import all_or_nothing, atomic_text_file, check_writable
 from egnc.io.edges_csv import write_edges_csv
 from egnc.io.trajectory import TrajectoryFormat, trajectory_format, write_trajectory
 from egnc.plot import figure_format, plot_trajectory, save_figure
@@ -76,7 +76,7 @@ class OutputPlan:
             for other_option, other in paths[:k]:
                 if _same_file(path, other):
                     raise EgncError(f"{path}: given to both {other_option} and {option}; choose two paths")
-            _check_writable(path)
+            check_writable(path)
         if self.trajectory is not None:
             trajectory_format(self.trajectory, self.trajectory_format)
         if self.plot is not None:
@@ -124,16 +124,3 @@ def _same_file(a: Path, b: Path) -> bool:
         return os.path.samefile(a, b)
     return a.resolve() == b.resolve()
 
-
-def _check_writable(path: Path) -> None:
-    """Raise unless a file can be created or replaced at `path`."""
-    directory = path.parent
-    if path.is_dir():
-        problem = "is a directory"
-    elif not directory.is_dir():
-        problem = f"directory {directory} does not exist"
-    elif not os.access(directory, os.W_OK | os.X_OK):
-        problem = f"directory {directory} is not writable"
-    else:
-        return
-    raise EgncError(f"{path}: cannot write file: {problem}")

@@ -64,6 +64,25 @@ def all_or_nothing() -> Iterator[None]:
         _pending.reset(token)
 
 
+def check_writable(path: Path) -> None:
+    """Raise unless a file can be created or replaced at `path`: checked before a long solve or
+    replay, so that a wrong path fails at once, not when the file is written.
+
+    Raises:
+        EgncError: `path` is a directory, or its directory does not exist or is not writable.
+    """
+    directory = path.parent
+    if path.is_dir():
+        problem = "is a directory"
+    elif not directory.is_dir():
+        problem = f"directory {directory} does not exist"
+    elif not os.access(directory, os.W_OK | os.X_OK):
+        problem = f"directory {directory} is not writable"
+    else:
+        return
+    raise EgncError(f"{path}: cannot write file: {problem}")
+
+
 def remove_stale_temporaries(path: Path) -> list[Path]:
     """Remove the temporaries of `path` left by processes that are no longer running.
 
