@@ -11,10 +11,10 @@ The `Result` of a replay lists the edges in the graph's own (file) order, so its
 `rejected_edges` included, are those of `egnc.solve` on the same graph.
 
 Checkpoints: with `checkpoint`, the solver's whole state is written there (atomically) every
-`checkpoint_every` steps and after the last one, together with how many steps were done and a
-fingerprint of the graph. A replay given an existing checkpoint of the same graph and settings
-resumes after its last step; since every update is deterministic, the final result equals an
-uninterrupted run's.
+`checkpoint_every` steps and after the last one, together with a fingerprint of the graph. A
+replay given an existing checkpoint of the same graph and settings resumes after its last step
+(the solver's update count: one update per step); since every update is deterministic, the final
+result equals an uninterrupted run's.
 """
 
 from __future__ import annotations
@@ -36,7 +36,10 @@ from egnc.io.atomic import check_writable
 from egnc.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
 
-__all__ = ["ReplayOutcome", "add_gauge", "add_step", "latency_summary", "replay", "replay_steps"]
+__all__ = ["CHECKPOINT_EVERY", "ReplayOutcome", "add_gauge", "add_step", "latency_summary", "replay", "replay_steps"]
+
+CHECKPOINT_EVERY = 50
+"""Steps between two checkpoint writes unless told otherwise."""
 
 StepCallback = Callable[[int, int, UpdateReport], None]
 """Receives `(step, total_steps, report)` after every update (progress display)."""
@@ -106,7 +109,7 @@ def replay(
     gnc_options: GncOptions | None = None,
     online_options: OnlineOptions | None = None,
     checkpoint: str | Path | None = None,
-    checkpoint_every: int = 50,
+    checkpoint_every: int = CHECKPOINT_EVERY,
     stop_after: int | None = None,
     on_step: StepCallback | None = None,
 ) -> ReplayOutcome:

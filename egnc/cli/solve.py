@@ -39,7 +39,7 @@ from egnc.io.trajectory import TRAJECTORY_FORMATS
 from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.linear_solvers import LINEAR_SOLVERS, resolve_name
 from egnc.online import ONLINE_METHODS, OnlineOptions
-from egnc.replay import latency_summary, replay
+from egnc.replay import CHECKPOINT_EVERY, latency_summary, replay
 from egnc.step_solver import LINEAR_METHODS
 
 EXIT_NUMERICAL_FAILURE = 3
@@ -156,9 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--checkpoint-every",
         type=int_at_least(1),
-        default=50,
         metavar="N",
-        help="with --checkpoint: steps between two saves (default 50; one more after the last step)",
+        help=f"with --checkpoint: steps between two saves (default {CHECKPOINT_EVERY}; one more after the last step)",
     )
     parser.add_argument(
         "--region-hops",
@@ -287,7 +286,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
                 linear_solver=args.linear_solver,
                 options=options,
                 checkpoint=args.checkpoint,
-                checkpoint_every=args.checkpoint_every,
+                checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY,
                 online_options=online_options,
                 on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
             )
@@ -329,6 +328,8 @@ def _check_options(args: argparse.Namespace) -> None:
         raise EgncError("--online places every new pose by composing its odometry: --init does not apply")
     if not args.online and args.checkpoint is not None:
         raise EgncError("--checkpoint saves the state of an --online replay: add --online")
+    if args.checkpoint is None and args.checkpoint_every is not None:
+        raise EgncError("--checkpoint-every sets how often --checkpoint saves: add --checkpoint")
     if not args.online and args.region_hops is not None:
         raise EgncError("--region-hops sets how an --online update solves: add --online")
     if args.decide_at_arrival and (not args.online or args.method != "egnc"):
