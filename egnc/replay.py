@@ -156,8 +156,6 @@ def replay(
     solver: OnlineSolver | None = None
     done = 0
     path = None if checkpoint is None else Path(checkpoint)
-    if path is not None and not path.exists():
-        check_writable(path)  # before the first steps, not at the first save
     if path is not None and path.exists():
         solver, meta = OnlineSolver.load(path)
         # Checkpoints written before decide_at_arrival existed solved every update.
@@ -170,6 +168,8 @@ def replay(
             what = ", ".join(differs) if same_graph else "another graph or edge roles"
             raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
         done = solver.steps  # one update per step
+    elif path is not None:
+        check_writable(path)  # before the first steps, not at the first save
     if solver is None:
         solver = OnlineSolver(
             graph.dim,

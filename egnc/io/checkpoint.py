@@ -41,6 +41,7 @@ def write_checkpoint(path: Path, settings: dict, arrays: dict[str, np.ndarray]) 
         TypeError, ValueError: `settings` is not JSON data (nothing is written).
         EgncError: the file cannot be written.
     """
+    assert set(settings) == set(SETTINGS), "a checkpoint's settings are SETTINGS"
     text = json.dumps(settings)
     with atomic_binary_file(path) as out:
         np.savez(out, settings=np.array(text), **arrays)  # type: ignore[arg-type]
@@ -125,7 +126,7 @@ def _inconsistency(settings: dict, arrays: dict[str, np.ndarray]) -> str:
     if trusted.ndim != 1 or trusted.dtype.kind != "b" or len(trusted) > num_edges:
         return f"converged_trusted is {trusted.dtype} {trusted.shape}, expected bool (at most {num_edges},)"
     if not _is_int(settings["steps"]) or settings["steps"] != steps:
-        return f"steps is {settings['steps']!r}, expected {steps} (one per update time)"
+        return f"steps is {settings['steps']!r}, expected {steps} (one per entry of update_ms)"
     if not _is_int(settings["last_status"]) or not isinstance(settings["has_prior"], bool):
         return "last_status must be an int and has_prior a bool"
     if not isinstance(settings["meta"], dict):
@@ -192,8 +193,10 @@ def _positive_definite(information: np.ndarray) -> bool:
 
 
 def _kind_name(kind: str) -> str:
+    """The word for NumPy dtype kinds `kind` in a message."""
     return {"iu": "int", "f": "float", "b": "bool"}[kind]
 
 
 def _is_int(value: object) -> bool:
+    """Whether a JSON value is an integer (not a bool, which JSON keeps apart but Python does not)."""
     return isinstance(value, int) and not isinstance(value, bool)
