@@ -2,7 +2,7 @@
 
     nice -n 10 python benchmarks/bench_online_vs_isam2.py [--datasets manhattanOlson3500,sphere2500,city10000]
         [--percent 30] [--seed 1] [--repeats 1] [--relinearize-skips 10] [--egnc-timeout 1200]
-        [--isam2-timeout 600] [--region-hops N] [--decide-at-arrival] [--json rows.jsonl]
+        [--isam2-timeout 600] [--region-hops N] [--boundary-share S] [--decide-at-arrival] [--json rows.jsonl]
 
 For every dataset: `egnc-corrupt` writes the graph with `--percent` false loop closures (riSAM's
 protocol, `--seed`) and its labels to a temporary folder; then, `--repeats` times and alternated
@@ -195,6 +195,8 @@ def bench_dataset(name: str, args: argparse.Namespace, folder: Path) -> list[str
     egnc_command = [egnc_solve, str(corrupted), "--online", "--report", str(report), "-o", str(estimate)]
     if args.region_hops is not None:
         egnc_command += ["--region-hops", str(args.region_hops)]
+    if args.boundary_share is not None:
+        egnc_command += ["--boundary-share", f"{args.boundary_share:g}"]
     if args.decide_at_arrival:
         egnc_command.append("--decide-at-arrival")
     skips = [int(s) for s in args.relinearize_skips.split(",")]
@@ -234,6 +236,7 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=1, help="A, B pairs per dataset")
     parser.add_argument("--relinearize-skips", default="10", help="ISAM2 variants, e.g. 10,1 (GTSAM's default is 10)")
     parser.add_argument("--region-hops", type=int, help="egnc-solve --region-hops (default: egnc-solve's own)")
+    parser.add_argument("--boundary-share", type=float, help="egnc-solve --boundary-share (default: its own)")
     parser.add_argument("--decide-at-arrival", action="store_true", help="egnc-solve --decide-at-arrival")
     parser.add_argument("--egnc-timeout", type=float, default=1200.0, help="seconds before egnc's child is killed")
     parser.add_argument("--isam2-timeout", type=float, default=600.0, help="seconds before ISAM2's child is killed")

@@ -226,6 +226,7 @@ def _bad_online_option(rng: random.Random) -> dict[str, object]:
         "decide_at_arrival": ("no", 0, None),
         "rel_cost_tol": (1.0, -1e-4, np.nan, "1e-4", None),
         "region_hops": (0, -1, 2.5, True, "8"),
+        "boundary_share": (-1e-3, 1.5, np.inf, np.nan, "1e-3", None, True),
     }
     name = rng.choice(sorted(bad))
     return {name: rng.choice(bad[name])}

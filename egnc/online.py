@@ -41,7 +41,8 @@ at the optimum and solves nothing. An update with a loop closure first solves th
 stages end a loop closure on the other side of the strong-outlier line than it began (an older
 one either way, a new one outwards), the update is redone on the whole map from its start; when
 the region's boundary would still move (its poses' own Newton steps would lower the cost by more
-than `BOUNDARY_SHARE` of the update's tolerance), the last stage goes on over the whole map.
+than `OnlineOptions.boundary_share` of the update's tolerance), the last stage goes on over the
+whole map.
 A whole-map solve builds the grown system's normal-equations pattern in pose-row order (CG
 solves it; no fill-reducing order is computed) and analyses the preconditioner of the edges the
 map trusts (ordering and symbolic factorization, `egnc.step_solver`).
@@ -102,11 +103,6 @@ _RESIDUAL_AT_REST = 1e-9
 WHOLE_MAP_SHARE = 0.5
 """An update whose region holds more than this share of the poses solves the whole map instead."""
 
-BOUNDARY_SHARE = 1e-3
-"""A local update is finished on the whole map when its boundary poses' block-Jacobi decrease
-exceeds this share of the update's cost tolerance: one pose at a time underestimates what the
-map's long, soft modes release (docs/online.md)."""
-
 
 @dataclass(frozen=True)
 class OnlineOptions:
@@ -147,6 +143,12 @@ class OnlineOptions:
             loop on the other side of the strong-outlier line or its boundary would still move
             (module docstring; docs/online.md has the measurements). None: every update solves
             the whole map.
+        boundary_share: a region's update goes on over the whole map for its last stage when its
+            boundary poses' own Newton steps (block Jacobi) would lower the cost by more than this
+            share of the update's tolerance (`rel_cost_tol` times the cost). One pose at a time
+            underestimates what the map's long, soft modes release, hence a small share. Larger:
+            fewer whole-map stages and a lower latency, for a running estimate further from the
+            whole map's optimum (docs/online.md has the measurements).
     """
 
     regraduate: Literal["reference", "new"] = "reference"
@@ -157,6 +159,7 @@ class OnlineOptions:
     decide_at_arrival: bool = False
     rel_cost_tol: float = 1e-4
     region_hops: int | None = 8
+    boundary_share: float = 1e-3
 
     def __post_init__(self) -> None:
         """Check every field's type and range (`egnc.checks`), storing plain Python values."""
@@ -164,6 +167,7 @@ class OnlineOptions:
         checked: dict[str, object] = {
             "regraduate": check_choice(name + "regraduate", self.regraduate, ("reference", "new")),
             "rel_cost_tol": check_float(name + "rel_cost_tol", self.rel_cost_tol, 0.0, 1.0, open_high=True),
+            "boundary_share": check_float(name + "boundary_share", self.boundary_share, 0.0, 1.0),
         }
         low, high = (
             check_float(name + field_name, getattr(self, field_name), 0.0, 1.0, open_low=True, open_high=True)
@@ -928,7 +932,7 @@ class OnlineSolver:
 
     def _boundary_strained(self, local: LocalProblem, neighbourhoods: Neighbourhoods, whole_cost: float) -> bool:
         """Whether the boundary poses' own Newton steps would lower the cost by more than
-        `BOUNDARY_SHARE` of the update's tolerance (`egnc.region.block_jacobi_decrease`), that
+        `OnlineOptions.boundary_share` of the update's tolerance (`egnc.region.block_jacobi_decrease`), that
         is of `rel_cost_tol` times `whole_cost`, the whole map's kernel cost."""
         boundary = local.boundary[local.boundary != self._gauge]
         if not len(boundary):
@@ -937,7 +941,7 @@ class OnlineSolver:
         weights = KernelLoss(self._kernel, self._mu[edges], self._robust[edges]).weight(self._r[edges])
         decrease = block_jacobi_decrease(self._current_factors(), edges, self._T, weights, boundary)
         tolerance = self._stage_options()[0].rel_cost_tol * whole_cost
-        return float(decrease.sum()) > BOUNDARY_SHARE * tolerance
+        return float(decrease.sum()) > self.online_options.boundary_share * tolerance
 
     def _next_mu(self, stage_index: int, active: np.ndarray, strong: np.ndarray) -> np.ndarray:
         """The `mu` of the `active` loops (edge indices) at stage `stage_index` >= 1 of an

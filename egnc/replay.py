@@ -152,14 +152,16 @@ def replay(
         # A resumed run keeps its checkpoint's options; one asked to solve otherwise is refused.
         "region_hops": (online_options or OnlineOptions()).region_hops,
         "decide_at_arrival": (online_options or OnlineOptions()).decide_at_arrival,
+        "boundary_share": (online_options or OnlineOptions()).boundary_share,
     }
     solver: OnlineSolver | None = None
     done = 0
     path = None if checkpoint is None else Path(checkpoint)
     if path is not None and path.exists():
         solver, meta = OnlineSolver.load(path)
-        # Checkpoints written before decide_at_arrival existed solved every update.
-        saved = {key: meta.get(key, False if key == "decide_at_arrival" else None) for key in settings}
+        # Checkpoints written before an option existed solved as its default does now.
+        defaults = {"decide_at_arrival": False, "boundary_share": OnlineOptions().boundary_share}
+        saved = {key: meta.get(key, defaults.get(key)) for key in settings}
         if saved != settings:
             differs = (
                 f"{key} {old!r} (this run: {settings[key]!r})" for key, old in saved.items() if old != settings[key]

@@ -105,6 +105,7 @@ def test_online_replay_of_a_g2o_file_keeps_file_edge_order(tmp_path):
         (["--checkpoint", "x.npz"], "add --online"),
         (["--online", "--checkpoint-every", "5"], "add --checkpoint"),
         (["--region-hops", "4"], "add --online"),
+        (["--boundary-share", "0.01"], "add --online"),
         (["--decide-at-arrival"], "--decide-at-arrival"),
         (["--online", "--method", "risam", "--decide-at-arrival"], "--decide-at-arrival"),
         (["--online", "--init", "chordal"], "--init does not apply"),

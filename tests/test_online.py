@@ -388,12 +388,12 @@ def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path, decide_at
         replay(graph, "egnc", checkpoint=path, online_options=replace(options, decide_at_arrival=not decide_at_arrival))
 
 
-def test_a_checkpoint_from_before_decide_at_arrival_resumes(tmp_path):
+def test_a_checkpoint_from_before_decide_at_arrival_and_boundary_share_resumes(tmp_path):
     graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 60)
     path = tmp_path / "old.npz"
     first = replay(graph, "egnc", checkpoint=path, stop_after=30)
     solver, meta = OnlineSolver.load(path)
-    del meta["decide_at_arrival"]  # as written before the option existed
+    del meta["decide_at_arrival"], meta["boundary_share"]  # as written before the options existed
     solver.save(path, meta=meta)
     resumed = replay(graph, "egnc", checkpoint=path)
     assert first.steps == 30 and resumed.resumed_from == 30
@@ -656,6 +656,28 @@ def test_local_updates_reach_the_whole_map_estimate_and_solve_less():
         assert optimum.cost <= cost <= (1 + OnlineOptions().rel_cost_tol) * optimum.cost
     np.testing.assert_allclose(to_matrices(2, local.poses), to_matrices(2, whole.poses), atol=2e-3)
     np.testing.assert_array_equal(outcomes[8].result.inliers, outcomes[None].result.inliers)
+
+
+def test_a_larger_boundary_share_finishes_more_updates_in_their_region_with_the_same_decision(tmp_path):
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o")
+    outcomes, pulled = {}, {}
+    for share in (OnlineOptions().boundary_share, 0.5):
+        reports: list = []
+        options = OnlineOptions(boundary_share=share)
+        keep = reports.append
+        outcomes[share] = replay(graph, "egnc", online_options=options, on_step=lambda *step, keep=keep: keep(step[2]))
+        # Updates that started in a region and went on to the whole map (the boundary pulled, or a crossing).
+        pulled[share] = sum(report.region_poses > 0 and report.whole_map for report in reports)
+    default, loose = outcomes[OnlineOptions().boundary_share], outcomes[0.5]
+    assert pulled[0.5] < pulled[OnlineOptions().boundary_share]
+    np.testing.assert_array_equal(loose.result.inliers, default.result.inliers)
+    with pytest.raises(OptionError, match="OnlineOptions.boundary_share"):
+        OnlineOptions(boundary_share=1.5)
+    # A checkpoint keeps its share: a run asked to resume with another is refused.
+    path = tmp_path / "state.npz"
+    replay(graph, "egnc", checkpoint=path, stop_after=20, online_options=OnlineOptions(boundary_share=0.5))
+    with pytest.raises(EgncError, match=r"boundary_share 0.5 \(this run: 0.001\)"):
+        replay(graph, "egnc", checkpoint=path)
 
 
 def test_region_hops_is_checked():

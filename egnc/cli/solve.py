@@ -25,7 +25,7 @@ import numpy as np
 
 from egnc import __version__
 from egnc.api import INITIALIZATIONS, METHODS, Result, solve
-from egnc.cli.arguments import int_at_least, positive_float
+from egnc.cli.arguments import int_at_least, positive_float, share
 from egnc.cli.outputs import OutputPlan
 from egnc.cli.progress import Progress, StepProgress
 from egnc.cli.report import report_dict, summary
@@ -168,6 +168,15 @@ def build_parser() -> argparse.ArgumentParser:
         " 0: always the whole map)",
     )
     parser.add_argument(
+        "--boundary-share",
+        type=share,
+        metavar="S",
+        help="with --online: a loop update finishes on the whole map when its region's boundary would still"
+        " lower the cost by more than S times the update's tolerance (default"
+        f" {OnlineOptions().boundary_share}; larger: lower latency, a running estimate further from the"
+        " optimum, the same final decision)",
+    )
+    parser.add_argument(
         "--decide-at-arrival",
         action="store_true",
         help="with --online and --method egnc: solve nothing for a loop update whose stages, predicted from the"
@@ -279,6 +288,8 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
             online_options = OnlineOptions(decide_at_arrival=args.decide_at_arrival)
             if args.region_hops is not None:
                 online_options = replace(online_options, region_hops=args.region_hops or None)
+            if args.boundary_share is not None:
+                online_options = replace(online_options, boundary_share=args.boundary_share)
             outcome = replay(
                 graph,
                 args.method,
@@ -332,6 +343,8 @@ def _check_options(args: argparse.Namespace) -> None:
         raise EgncError("--checkpoint-every sets how often --checkpoint saves: add --checkpoint")
     if not args.online and args.region_hops is not None:
         raise EgncError("--region-hops sets how an --online update solves: add --online")
+    if not args.online and args.boundary_share is not None:
+        raise EgncError("--boundary-share sets how an --online update solves: add --online")
     if args.decide_at_arrival and (not args.online or args.method != "egnc"):
         raise EgncError("--decide-at-arrival sets how an --online update with --method egnc solves")
     if is_irl(args.input) and (args.skip_unknown or args.information != "strict"):
