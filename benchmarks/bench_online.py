@@ -2,7 +2,7 @@
 
     python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
-        [--regraduate reference|new] [--region-hops N] [--strong-at-arrival] [--decide-at-arrival]
+        [--regraduate reference|new] [--region-hops N] [--boundary-share S] [--strong-at-arrival] [--decide-at-arrival]
         [--rel-cost-tol TOL] [--linear-solver auto]
         [--json results.jsonl]
 
@@ -60,6 +60,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
         strong_at_arrival=args.strong_at_arrival and method == "egnc",
         decide_at_arrival=args.decide_at_arrival and method == "egnc",
         **({} if args.region_hops is None else {"region_hops": args.region_hops or None}),
+        **({} if args.boundary_share is None else {"boundary_share": args.boundary_share}),
         **({} if args.rel_cost_tol is None else {"rel_cost_tol": args.rel_cost_tol}),
     )
     decided, restarted = [], []
@@ -151,6 +152,7 @@ def main() -> int:
     parser.add_argument(
         "--region-hops", type=int, help="OnlineOptions.region_hops (default: its default); 0: the whole map"
     )
+    parser.add_argument("--boundary-share", type=float, help="OnlineOptions.boundary_share (default: its default)")
     parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
     parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
     parser.add_argument("--decide-at-arrival", action="store_true", help="OnlineOptions(decide_at_arrival=True)")
