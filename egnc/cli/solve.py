@@ -174,7 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --online: a loop update finishes on the whole map when its region's boundary would still"
         " lower the cost by more than S times the update's tolerance (default"
         f" {OnlineOptions().boundary_share}; larger: lower latency, a running estimate further from the"
-        " optimum, the same final decision)",
+        " optimum; docs/online.md)",
     )
     parser.add_argument(
         "--decide-at-arrival",
