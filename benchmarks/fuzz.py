@@ -79,12 +79,7 @@ def source_texts(poses: int = 30) -> dict[str, str]:
     texts = {}
     with tempfile.TemporaryDirectory() as folder:
         for path in sorted(DATASETS.glob("*.g2o")):
-            graph = read_g2o(path)
-            keep = (graph.edges < poses).all(axis=1)
-            small = egnc.PoseGraph(
-                graph.dim, graph.vertex_ids[:poses], graph.poses[:poses], graph.edges[keep],
-                graph.measurements[keep], graph.information[keep],
-            )  # fmt: skip
+            small = read_g2o(path).first_poses(poses)
             out = Path(folder) / path.name
             write_g2o(small, out)
             texts[path.name] = out.read_text()

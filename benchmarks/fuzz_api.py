@@ -114,7 +114,7 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
     """Misuse name -> a function of the random generator making one wrong call."""
     path = fuzz.DATASETS / "grid2d.g2o"
     out = folder / "out.g2o"
-    small = _first_poses(graph, 20)  # a replay needs every pose on an edge
+    small = graph.first_poses(20)  # a replay needs every pose on an edge
     return {
         "solve: graph": lambda rng: egnc.solve(_junk(rng, not_=(str,))),  # type: ignore[arg-type]
         "solve: options": lambda rng: egnc.solve(graph, options=_junk(rng, not_=(egnc.SolverOptions,))),  # type: ignore[arg-type]
@@ -191,19 +191,6 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
             )
         )(_online()),
     }
-
-
-def _first_poses(graph: egnc.PoseGraph, count: int) -> egnc.PoseGraph:
-    """The graph of the first `count` poses and the edges among them."""
-    keep = (graph.edges < count).all(axis=1)
-    return egnc.PoseGraph(
-        dim=graph.dim,
-        vertex_ids=graph.vertex_ids[:count],
-        poses=graph.poses[:count],
-        edges=graph.edges[keep],
-        measurements=graph.measurements[keep],
-        information=graph.information[keep],
-    )
 
 
 def _online() -> OnlineSolver:

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import fuzz
-import fuzz_api
 import numpy as np
 
 from egnc.errors import EgncError
@@ -57,7 +56,7 @@ def base_checkpoints(folder: Path) -> dict[int, bytes]:
     checkpoints = {}
     for dim, name in ((2, "grid2d_outliers.g2o"), (3, "grid3d_outliers.g2o")):
         path = folder / f"base{dim}.npz"
-        replay(fuzz_api._first_poses(read_g2o(fuzz.DATASETS / name), POSES), "egnc", checkpoint=path)
+        replay(read_g2o(fuzz.DATASETS / name).first_poses(POSES), "egnc", checkpoint=path)
         checkpoints[dim] = path.read_bytes()
     return checkpoints
 

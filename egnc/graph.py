@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from egnc.checks import describe
+from egnc.checks import check_int, describe
 from egnc.errors import GraphError, OptionError
 from egnc.validity import (
     NO_EDGES,
@@ -216,6 +216,30 @@ class PoseGraph:
     def with_poses(self, poses: np.ndarray) -> PoseGraph:
         """Return a copy of the graph with new poses `(N, P)`, e.g. an optimized trajectory."""
         return replace(self, poses=poses)
+
+    def first_poses(self, count: int) -> PoseGraph:
+        """The graph of the first `count` poses (rows) and the edges among them: what a log holds
+        after its `count`-th pose (a replay's prefix, a small piece of a large file). The lines of
+        unknown tags are left out (they may name later vertices).
+
+        Raises:
+            OptionError: `count` is not an integer from 1 to `num_poses`.
+            GraphError: no edge joins two of those poses.
+        """
+        count = check_int("count", count, 1)
+        if count > self.num_poses:
+            raise OptionError(f"count must be at most the {self.num_poses} poses, got {count}")
+        keep = (self.edges < count).all(axis=1)
+        return PoseGraph(
+            self.dim,
+            self.vertex_ids[:count],
+            self.poses[:count],
+            self.edges[keep],
+            self.measurements[keep],
+            self.information[keep],
+            fixed=self.fixed[:count],
+            edge_lines=self.edge_lines[keep],
+        )
 
     def subgraph_edges(self, keep: np.ndarray) -> PoseGraph:
         """Return a copy with only the edges where `keep` `(E,)` bool is true (poses unchanged).

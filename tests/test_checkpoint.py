@@ -19,23 +19,11 @@ from egnc.replay import replay
 DATA = Path(__file__).parents[1] / "datasets"
 
 
-def _first_poses(graph: egnc.PoseGraph, count: int) -> egnc.PoseGraph:
-    keep = (graph.edges < count).all(axis=1)
-    return egnc.PoseGraph(
-        dim=graph.dim,
-        vertex_ids=graph.vertex_ids[:count],
-        poses=graph.poses[:count],
-        edges=graph.edges[keep],
-        measurements=graph.measurements[keep],
-        information=graph.information[keep],
-    )
-
-
 @pytest.fixture(scope="module", params=["grid2d_outliers.g2o", "grid3d_outliers.g2o"])
 def checkpoint(request, tmp_path_factory) -> bytes:
     """The bytes of a checkpoint of a replay of 40 poses with loop closures (2D, 3D)."""
     path = tmp_path_factory.mktemp("checkpoint") / "state.npz"
-    replay(_first_poses(egnc.read_g2o(DATA / request.param), 40), "egnc", checkpoint=path)
+    replay(egnc.read_g2o(DATA / request.param).first_poses(40), "egnc", checkpoint=path)
     return path.read_bytes()
 
 
@@ -161,7 +149,7 @@ def test_settings_that_are_not_a_json_object_are_refused(checkpoint, tmp_path):
 
 def test_the_cli_refuses_an_empty_checkpoint_in_one_line_and_writes_nothing(tmp_path):
     graph = tmp_path / "small.g2o"
-    egnc.write_g2o(_first_poses(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 30), graph)
+    egnc.write_g2o(egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(30), graph)
     state, out = tmp_path / "state.npz", tmp_path / "out.g2o"
     state.write_bytes(b"")
     run = subprocess.run(
@@ -175,7 +163,7 @@ def test_the_cli_refuses_an_empty_checkpoint_in_one_line_and_writes_nothing(tmp_
 
 
 def test_a_checkpoint_that_cannot_be_written_fails_before_the_first_step(tmp_path):
-    graph = _first_poses(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 30)
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(30)
     steps = []
     with pytest.raises(EgncError, match=r"missing/state.npz: cannot write file: directory .*missing does not exist"):
         replay(graph, "egnc", checkpoint=tmp_path / "missing" / "state.npz", on_step=lambda *step: steps.append(step))

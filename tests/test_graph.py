@@ -117,6 +117,25 @@ def test_subgraph_mask_of_the_wrong_length_or_type_is_an_option_error():
     assert graph.subgraph_edges(np.array([True, True, True, False])).num_edges == 3
 
 
+def test_first_poses_keeps_those_poses_and_the_edges_among_them():
+    graph = dataclasses.replace(chain(6), fixed=np.array([False, True, False, False, False, False]))
+    first = graph.first_poses(4)
+    np.testing.assert_array_equal(first.vertex_ids, graph.vertex_ids[:4])
+    np.testing.assert_array_equal(first.poses, graph.poses[:4])
+    np.testing.assert_array_equal(first.fixed, graph.fixed[:4])
+    # The odometry 0-1, 1-2, 2-3: the edges 3-4, 4-5 and the loop 5-0 reach beyond pose 3.
+    np.testing.assert_array_equal(first.edges, [[0, 1], [1, 2], [2, 3]])
+    np.testing.assert_array_equal(first.measurements, graph.measurements[:3])
+    np.testing.assert_array_equal(first.edge_lines, graph.edge_lines[:3])
+    assert graph.first_poses(6).num_edges == graph.num_edges
+    with pytest.raises(OptionError, match="count must be at most the 6 poses, got 7"):
+        graph.first_poses(7)
+    with pytest.raises(OptionError, match="count must be an integer"):
+        graph.first_poses(2.0)  # type: ignore[arg-type]
+    with pytest.raises(GraphError, match="no edges"):
+        graph.first_poses(1)
+
+
 def test_repr_is_short():
     graph = read_g2o(Path(__file__).parents[1] / "datasets" / "grid2d_outliers.g2o")
     text = repr(graph)

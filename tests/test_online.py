@@ -16,7 +16,6 @@ from egnc.datasets.labels import read_labels
 from egnc.decision import Decision, truncated_cost
 from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import from_matrices, group_of, to_matrices
-from egnc.graph import PoseGraph
 from egnc.kernels import make_kernel
 from egnc.least_squares import Problem, SolverOptions, solve_least_squares
 from egnc.linear_solvers import cholmod_available
@@ -298,7 +297,7 @@ def test_the_predicted_last_stage_keeps_the_loops_the_solve_keeps(count, measure
 
 
 def test_egnc_schedule_takes_fewer_iterations_than_risam_on_the_same_updates():
-    graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 200)
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(200)
     iterations = {method: int(replay(graph, method).update_iterations.sum()) for method in ("egnc", "risam")}
     assert iterations["egnc"] < iterations["risam"]
 
@@ -343,22 +342,9 @@ def test_both_linear_backends_give_the_same_online_estimate():
     np.testing.assert_allclose(estimates[0], estimates[1], atol=1e-9)
 
 
-def _prefix(graph: PoseGraph, num_poses: int) -> PoseGraph:
-    """The subgraph of the first `num_poses` rows and the edges among them."""
-    keep = (graph.edges < num_poses).all(axis=1)
-    return PoseGraph(
-        graph.dim,
-        graph.vertex_ids[:num_poses],
-        graph.poses[:num_poses],
-        graph.edges[keep],
-        graph.measurements[keep],
-        graph.information[keep],
-    )
-
-
 @pytest.mark.parametrize("decide_at_arrival", [False, True])
 def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path, decide_at_arrival):
-    graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 150)
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(150)
     options = OnlineOptions(decide_at_arrival=decide_at_arrival)
     whole = replay(graph, "egnc", online_options=options)
     path = tmp_path / "state.npz"
@@ -379,7 +365,7 @@ def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path, decide_at
     np.testing.assert_array_equal(resumed.result.inliers, whole.result.inliers)
     np.testing.assert_array_equal(resumed.update_iterations, whole.update_iterations)
     with pytest.raises(EgncError, match="another graph"):
-        replay(_prefix(graph, 149), "egnc", checkpoint=path, online_options=options)
+        replay(graph.first_poses(149), "egnc", checkpoint=path, online_options=options)
     with pytest.raises(EgncError, match=r"method 'egnc' \(this run: 'risam'\)"):
         replay(graph, "risam", checkpoint=path, online_options=options)
     with pytest.raises(EgncError, match=r"region_hops 8 \(this run: None\)"):
@@ -389,7 +375,7 @@ def test_checkpoint_and_resume_give_the_uninterrupted_result(tmp_path, decide_at
 
 
 def test_a_checkpoint_from_before_decide_at_arrival_and_boundary_share_resumes(tmp_path):
-    graph = _prefix(egnc.read_g2o(DATA / "grid2d_outliers.g2o"), 60)
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(60)
     path = tmp_path / "old.npz"
     first = replay(graph, "egnc", checkpoint=path, stop_after=30)
     solver, meta = OnlineSolver.load(path)
