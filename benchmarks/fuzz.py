@@ -30,7 +30,7 @@ import signal
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -311,6 +311,17 @@ def table(outcomes: list[Outcome]) -> str:
             counts.update(f"solve: {solve}" for solve in outcome.solves)
             counts["stdout"] += outcome.stdout
     return counts_table(rows, columns, "operator")
+
+
+def outcomes_table(cases: Iterable[tuple[str, str]], classes: Sequence[str], counted: str, first: str) -> str:
+    """Markdown from `(row, outcome)` pairs: per row (and `**all**`), the cases (`counted` heads
+    their column) by outcome class (`classes`); `first` heads the row names."""
+    rows: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+    for name, outcome in cases:
+        for row in (name, "**all**"):
+            rows[row][counted] += 1
+            rows[row][outcome] += 1
+    return counts_table(rows, [counted, *classes], first)
 
 
 def counts_table(rows: dict[str, collections.Counter], columns: list[str], first: str = "kind") -> str:

@@ -21,7 +21,6 @@ Run from `benchmarks/fuzz.py --target api`; `tests/test_fuzz.py` runs fewer case
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import random
 from collections.abc import Callable
@@ -271,12 +270,7 @@ def fuzz_api(cases: int, seed: int, folder: Path) -> list[ApiCase]:
 
 def table(results: list[ApiCase]) -> str:
     """Markdown: per misuse, the calls made by outcome class."""
-    rows: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
-    for case in results:
-        for row in (case.kind, "**all**"):
-            rows[row]["calls"] += 1
-            rows[row][case.outcome] += 1
-    return fuzz.counts_table(rows, ["calls", *CLASSES], "misuse")
+    return fuzz.outcomes_table(((case.kind, case.outcome) for case in results), CLASSES, "calls", "misuse")
 
 
 def run_target(cases: int, seed: int) -> tuple[str, int]:

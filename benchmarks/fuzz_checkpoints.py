@@ -18,7 +18,6 @@ Run from `benchmarks/fuzz.py --target checkpoints`; `tests/test_fuzz.py` runs fe
 
 from __future__ import annotations
 
-import collections
 import io
 import json
 import random
@@ -199,12 +198,7 @@ def fuzz_checkpoints(cases: int, seed: int, folder: Path) -> list[CheckpointCase
 
 def table(results: list[CheckpointCase]) -> str:
     """Markdown: per operator, the cases by outcome class."""
-    rows: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
-    for case in results:
-        for row in (case.operator, "**all**"):
-            rows[row]["cases"] += 1
-            rows[row][case.outcome] += 1
-    return fuzz.counts_table(rows, ["cases", *CLASSES], "operator")
+    return fuzz.outcomes_table(((case.operator, case.outcome) for case in results), CLASSES, "cases", "operator")
 
 
 def run_target(cases: int, seed: int) -> tuple[str, int]:
