@@ -294,6 +294,23 @@ def test_right_jacobian_inverse_inverts_right_jacobian(name, seed, kind, shape):
     assert_close(product, np.broadcast_to(np.eye(d), product.shape), atol=1e-11)
 
 
+
+@group_names
+@PROPERTY
+@given(seed=seeds)
+def test_each_element_gets_the_same_bits_alone_as_in_any_batch(name, seed):
+    """The safe-theta coefficients skip a branch no entry of the batch uses (`egnc.lie._safe`):
+    a batch mixing small, large and edge angles must give every element the bits it gets alone."""
+    mod = GROUPS[name][0]
+    rng = np.random.default_rng(seed)
+    xi = np.concatenate([sample_tangent(name, rng, (3,), kind) for kind in KINDS])
+    X = mod.exp(xi)
+    for f, x in ((mod.exp, xi), (mod.log, X), (mod.right_jacobian, xi), (mod.right_jacobian_inverse, xi)):
+        batch = f(x)
+        for k in range(len(x)):
+            np.testing.assert_array_equal(f(x[k]), batch[k])
+            np.testing.assert_array_equal(f(x[k : k + 1])[0], batch[k])
+
 # --- conversions --------------------------------------------------------------------------------
 
 

@@ -3,6 +3,9 @@
 Each coefficient is computed on both sides of a threshold: a Taylor series where the closed form
 cancels, the closed form (with a denominator that cannot be zero) elsewhere, selected with
 `np.where`. No warning or NaN can leak from the unused branch (jaxlie's "safe theta" pattern).
+A branch that no entry of the batch uses is not computed at all: the kernels run on an online
+region's few edges as often as on a whole map's, and there the NumPy calls, not the elements,
+are the cost. Every entry gets the same bits either way.
 
 The closed forms take `sin(t/2)` and `cos(t/2)` from the caller: `exp` gets them from
 `sincos_half`, while SO(3) `log` already has them as the quaternion's `|v|` and `w`, so it needs
@@ -36,10 +39,13 @@ def sincos_half_from_cos_sin(cos_t: np.ndarray, sin_t: np.ndarray) -> tuple[np.n
     Of `sqrt((1 -+ cos t)/2)` only the one without cancellation is used (>= sqrt(1/2)); the
     other half-angle function follows from `sin t = 2 sin(t/2) cos(t/2)`.
     """
-    use_cos = cos_t >= 0.0
+    use_cos = np.asarray(cos_t >= 0.0)
+    abs_sin = np.abs(sin_t)
+    if use_cos.all():  # every angle within pi/2: the usual case, one branch
+        c = np.asarray(np.sqrt(np.maximum(0.5 * (1.0 + cos_t), 0.0)))
+        return np.asarray(abs_sin / (2.0 * c)), c
     c = np.sqrt(np.maximum(0.5 * (1.0 + cos_t), 0.0))
     s = np.sqrt(np.maximum(0.5 * (1.0 - cos_t), 0.0))
-    abs_sin = np.abs(sin_t)
     sin_half = np.where(use_cos, abs_sin / (2.0 * np.where(use_cos, c, 1.0)), s)
     cos_half = np.where(use_cos, c, abs_sin / (2.0 * np.where(use_cos, 1.0, s)))
     return sin_half, cos_half
@@ -74,20 +80,26 @@ def trig_coefficients(
     assert 1 <= n_max <= _MAX_ORDER
     theta2 = np.asarray(theta2, dtype=np.float64)
     small = theta2 < _SERIES_MAX_THETA2
+    all_small, none_small = bool(small.all()), not small.any()
 
-    # Series: sum the two highest orders, then step down with f_n = 1/n! - t^2 f_(n+2), which
-    # does not cancel for t < 1.
-    top = max(n_max, 3)
-    series = {top: _series(theta2, top), top - 1: _series(theta2, top - 1)}
-    for n in range(top - 2, 0, -1):
-        series[n] = 1.0 / math.factorial(n) - theta2 * series[n + 2]
+    if not none_small:
+        # Series: sum the two highest orders, then step down with f_n = 1/n! - t^2 f_(n+2),
+        # which does not cancel for t < 1.
+        top = max(n_max, 3)
+        series = {top: _series(theta2, top), top - 1: _series(theta2, top - 1)}
+        for n in range(top - 2, 0, -1):
+            series[n] = 1.0 / math.factorial(n) - theta2 * series[n + 2]
+        if all_small:
+            return tuple(np.asarray(series[n]) for n in range(1, n_max + 1))
 
     # Closed forms through the half angle: sin t = 2 s c and 1 - cos t = 2 s^2 do not cancel.
-    t2 = np.where(small, 1.0, theta2)
+    t2 = theta2 if none_small else np.where(small, 1.0, theta2)
     t = np.sqrt(t2)
     closed = {1: 2.0 * sin_half * cos_half / t, 2: 2.0 * sin_half * sin_half / t2}
     for n in range(3, n_max + 1):
         closed[n] = (1.0 / math.factorial(n - 2) - closed[n - 2]) / t2
+    if none_small:
+        return tuple(np.asarray(closed[n]) for n in range(1, n_max + 1))
     return tuple(np.where(small, series[n], closed[n]) for n in range(1, n_max + 1))
 
 
@@ -114,7 +126,9 @@ def jacobian_inverse_coefficient(
     Returns:
         `(...)`.
     """
-    small = theta2 < _SERIES_MAX_THETA2
+    small = np.asarray(theta2 < _SERIES_MAX_THETA2)
+    if small.all():
+        return np.asarray((f2 - 2.0 * f3) / (2.0 * f1))
     near_zero = (f2 - 2.0 * f3) / (2.0 * np.where(small, f1, 1.0))
     t2 = np.where(small, 1.0, theta2)
     safe_sin_half = np.where(sin_half == 0.0, 1.0, sin_half)
