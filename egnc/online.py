@@ -82,6 +82,7 @@ from egnc.errors import EgncError, GraphError, OptionError
 from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
 from egnc.gnc import GncOptions, StageReport, classify_inliers
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph, is_dim
+from egnc.index_sets import sorted_unique
 from egnc.io.checkpoint import CHECKPOINT_VERSION, read_checkpoint, write_checkpoint
 from egnc.kernels import make_kernel
 from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, SolverOptions, solve_least_squares
@@ -496,7 +497,7 @@ class OnlineSolver:
         elif needs_solve:
             graduating = self._graduating(new_loops)
             # A moved gauge moves the whole map; otherwise the change starts at the ends of the new edges.
-            seeds = None if prior_moved else np.unique(self._edges[np.union1d(new_loops, moving)])
+            seeds = None if prior_moved else sorted_unique(self._edges[np.concatenate((new_loops, moving))].ravel())
             # One preconditioner for all stages of the update (one analysis): the edges whose weight
             # is at least trust_weight at its start, the new loops (at mu_init) included, so that CG
             # has only the switched-off loops left to resolve.
@@ -706,7 +707,7 @@ class OnlineSolver:
             graduating = new_loops[~strong]
         if len(new_loops) and self.online_options.regraduate == "reference":
             loops = self._loops
-            graduating = np.union1d(graduating, loops[self._mu_init[loops] == 0.0])
+            graduating = sorted_unique(np.concatenate((graduating, loops[self._mu_init[loops] == 0.0])))
         return graduating
 
     def _factorize_map(self, trusted: np.ndarray, problem: Problem | None = None) -> ConvergedMap | None:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from egnc.factors import BetweenFactors
+from egnc.index_sets import sorted_unique
 from egnc.least_squares import Problem
 from egnc.normal_equations import edge_products
 
@@ -109,7 +110,7 @@ class Neighbourhoods:
             if hops_along is not None:
                 edges = edges[hops_along[edges]]
             ends = self.edges[edges].reshape(-1)
-            reached = np.unique(ends[~inside[ends]])
+            reached = sorted_unique(ends[~inside[ends]])
             if not len(reached):
                 break
             inside[reached] = True
@@ -120,7 +121,7 @@ class Neighbourhoods:
         """Sorted indices of the edges with at least one end among the poses `rows`."""
         among = np.zeros(self.num_poses, dtype=bool)
         among[rows] = True
-        return np.unique(self._incident_to(np.flatnonzero(among), among))
+        return sorted_unique(self._incident_to(np.flatnonzero(among), among))
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,9 +159,10 @@ class LocalProblem:
             linear_solver: backend name (`egnc.linear_solvers`).
         """
         edges = neighbourhoods.edges_of(region)
-        rows = np.unique(factors.edges[edges])
+        rows = sorted_unique(factors.edges[edges].ravel())
         local_edges = np.searchsorted(rows, factors.edges[edges])
-        free = np.isin(rows, region) & (rows != held)
+        in_region = region[np.minimum(np.searchsorted(region, rows), len(region) - 1)] == rows
+        free = in_region & (rows != held)
         local_factors = BetweenFactors(factors.dim, local_edges, factors.Z_inv[edges], factors.information[edges])
         # A region is small: its direct solver orders it itself, cheaper than a block order.
         return cls(rows, free, edges, Problem.from_factors(local_factors, ~free, linear_solver, fill_reducing=False))

