@@ -1,9 +1,8 @@
 """Sorted sets of integer indices (pose rows, edge indices), by sorting.
 
 NumPy 2's `np.unique` hashes integers; on the tens to thousands of indices an online update
-handles it took 4-25x as long as sorting and dropping repeats (53.8 against 11.6 us for 400
-pose rows, 311 against 38 us for the union of 2000 loop indices with two more, on the 2-core
-development machine).
+handles, that took 4-25x as long as sorting and dropping repeats (BENCHMARKS.md, "Small-batch
+costs of an online update").
 """
 
 from __future__ import annotations
