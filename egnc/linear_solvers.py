@@ -58,6 +58,7 @@ import scipy.sparse as sp
 
 from egnc.checks import check_instance
 from egnc.errors import EgncError, SolverError
+from egnc.index_sets import sorted_unique
 
 LinearSolverName = Literal["auto", "cholmod", "rslab", "scipy"]
 LINEAR_SOLVERS = ("auto", "cholmod", "rslab", "scipy")
@@ -307,6 +308,23 @@ def exact_factor_pattern(lower: sp.csc_matrix) -> tuple[sp.csc_matrix, np.ndarra
         return sp.csc_matrix(factor.L()), np.asarray(factor.P(), dtype=np.int64)
 
 
+def _lower_block_pattern(num_blocks: int, pairs: np.ndarray) -> sp.csc_matrix:
+    """The lower triangle, diagonal included, of the pattern of blocks joined by `pairs` `(K, 2)`
+    (no block with itself; repeats allowed), as a `(num_blocks, num_blocks)` CSC matrix of ones
+    with sorted int32 indices: what CHOLMOD's symbolic analysis reads. Built from sorted keys:
+    SciPy's COO conversion, duplicate sum and triangle took as long as the ordering itself."""
+    stride = max(num_blocks, 1)
+    low, high = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+    keys = sorted_unique(np.concatenate((low * stride + high, np.arange(num_blocks) * (stride + 1))))
+    columns, rows = np.divmod(keys, stride)
+    indptr = np.zeros(num_blocks + 1, dtype=np.int64)
+    np.cumsum(np.bincount(columns, minlength=num_blocks), out=indptr[1:])
+    index = np.int32 if len(keys) < 2**31 else np.int64
+    return sp.csc_matrix(
+        (np.ones(len(keys)), rows.astype(index), indptr.astype(index)), shape=(num_blocks, num_blocks)
+    )
+
+
 def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarray:
     """Fill-reducing order of the unknown blocks for backend `name` (the identity for `"rslab"`,
     which orders the scalar matrix itself).
@@ -323,6 +341,14 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
         return np.arange(num_blocks, dtype=np.int64)
     pairs = np.asarray(block_pairs, dtype=np.int64).reshape(-1, 2)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    if name == "cholmod":
+        cholmod = _cholmod_module()
+        lower = _lower_block_pattern(num_blocks, pairs)
+        try:
+            ordering = cholmod.analyze(lower, ordering_method="metis" if num_blocks >= METIS_MIN_BLOCKS else "amd")
+        except cholmod.CholmodNotInstalledError:  # a CHOLMOD built without METIS
+            ordering = cholmod.analyze(lower, ordering_method="amd")
+        return np.asarray(ordering.P(), dtype=np.int64)
     rows, cols = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
     # A diagonally dominant matrix with the pose graph's pattern: the orderings read only the
     # pattern, but SuperLU factorizes what it orders.
@@ -330,14 +356,6 @@ def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarr
     adjacency.sum_duplicates()
     degree = -np.asarray(adjacency.sum(axis=0)).ravel()
     matrix = (adjacency + sp.diags(degree + 1.0)).tocsc()
-    if name == "cholmod":
-        cholmod = _cholmod_module()
-        lower = sp.tril(matrix, format="csc")
-        try:
-            ordering = cholmod.analyze(lower, ordering_method="metis" if num_blocks >= METIS_MIN_BLOCKS else "amd")
-        except cholmod.CholmodNotInstalledError:  # a CHOLMOD built without METIS
-            ordering = cholmod.analyze(lower, ordering_method="amd")
-        return np.asarray(ordering.P(), dtype=np.int64)
     from scipy.sparse.linalg import splu
 
     lu = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})

@@ -238,3 +238,25 @@ def test_cholmod_without_metis_orders_a_large_graph_by_amd(monkeypatch):
     monkeypatch.setattr(sksparse.cholmod, "analyze", without_metis)
     monkeypatch.setattr(linear_solvers, "METIS_MIN_BLOCKS", 1)
     np.testing.assert_array_equal(block_order("cholmod", blocks, pairs), amd)
+
+
+def test_cholmods_block_pattern_is_the_lower_triangle_of_the_block_graph():
+    """What CHOLMOD orders: every block's diagonal and one entry per joined pair, whatever the
+    direction or repeats, against SciPy's own triangle of the symmetric pattern."""
+    rng = np.random.default_rng(11)
+    for blocks in (1, 2, 7, 60):
+        pairs = rng.integers(0, blocks, size=(3 * blocks, 2))
+        pairs = np.concatenate([pairs, pairs[: blocks // 2, ::-1]])  # repeats, both directions
+        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        pattern = linear_solvers._lower_block_pattern(blocks, pairs)
+        symmetric = sp.coo_matrix(
+            (np.ones(2 * len(pairs) + blocks), (np.r_[pairs[:, 0], pairs[:, 1], np.arange(blocks)],
+                                                np.r_[pairs[:, 1], pairs[:, 0], np.arange(blocks)])),
+            shape=(blocks, blocks),
+        )
+        expected = sp.tril(symmetric, format="csc")
+        expected.sum_duplicates()
+        expected.sort_indices()
+        assert pattern.has_sorted_indices and pattern.indices.dtype == np.int32
+        np.testing.assert_array_equal(pattern.indptr, expected.indptr)
+        np.testing.assert_array_equal(pattern.indices, expected.indices)
