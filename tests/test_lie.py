@@ -294,7 +294,6 @@ def test_right_jacobian_inverse_inverts_right_jacobian(name, seed, kind, shape):
     assert_close(product, np.broadcast_to(np.eye(d), product.shape), atol=1e-11)
 
 
-
 @group_names
 @PROPERTY
 @given(seed=seeds)
