@@ -165,6 +165,9 @@ class SolverResult:
         linear: direct solves, CG solves and iterations, CG fallbacks (`egnc.step_solver`).
         step_damping: the LM damping `lambda` (relative to `H`'s diagonal) of the last accepted
             step; 0 for Gauss-Newton and when no step was accepted.
+        errors: the residuals at `poses` with what a linearization there reuses
+            (`BetweenFactors.evaluate`), when the solve was asked to keep them (`keep_errors`),
+            else None.
     """
 
     poses: np.ndarray
@@ -179,6 +182,7 @@ class SolverResult:
     timings: dict[str, float] = field(default_factory=dict)
     linear: LinearStatistics = field(default_factory=LinearStatistics)
     step_damping: float = 0.0
+    errors: EdgeErrors | None = None
 
     @property
     def converged(self) -> bool:
@@ -286,6 +290,8 @@ def solve_least_squares(
     options: SolverOptions = SolverOptions(),
     on_iteration: IterationCallback | None = None,
     trusted: np.ndarray | None = None,
+    errors: EdgeErrors | None = None,
+    keep_errors: bool = False,
 ) -> SolverResult:
     """Minimize `sum rho(r_e)` over the free poses by GN or LM with IRLS weights.
 
@@ -298,6 +304,10 @@ def solve_least_squares(
         trusted: `(E,)` bool, the edges of the CG preconditioner for every linearization of this
             solve (`egnc.step_solver`); default: those whose weight is at least
             `options.trust_weight` at each linearization.
+        errors: `problem.factors.evaluate(initial_poses)` if already computed (at these very
+            poses, e.g. the `errors` of a solve that ended there), to reuse.
+        keep_errors: return the residuals at the solution in `SolverResult.errors`, for a next
+            solve from there (held as long as the result is: `E` relative poses).
 
     Returns:
         The `SolverResult`; it is returned (not raised) when the iteration limit is hit.
@@ -308,15 +318,15 @@ def solve_least_squares(
     factors, pattern = problem.factors, problem.pattern
     T = np.array(initial_poses, dtype=np.float64)
 
-    def evaluate(poses: np.ndarray) -> tuple[EdgeErrors, np.ndarray, float]:
-        errors = factors.evaluate(poses)
+    def evaluate(poses: np.ndarray, known: EdgeErrors | None = None) -> tuple[EdgeErrors, np.ndarray, float]:
+        errors = factors.evaluate(poses) if known is None else known
         r = factors.whitened_norms(errors.residuals)
         return errors, r, float(np.sum(loss.cost(r)))
 
     steps = problem.step_solver
     steps.start_solve()
     with clock("linearize"):
-        errors, r, cost = evaluate(T)
+        errors, r, cost = evaluate(T, errors)
     history = [cost]
     damping, growth = options.initial_damping, 2.0
     iterations = linear_solves = 0
@@ -406,4 +416,5 @@ def solve_least_squares(
         timings=dict(clock.totals),
         linear=steps.statistics,
         step_damping=step_damping,
+        errors=errors if keep_errors else None,
     )

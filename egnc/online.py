@@ -79,7 +79,7 @@ from egnc.arrival import ConvergedMap, FirstStage
 from egnc.checks import check_bool, check_choice, check_float, check_instance, check_int, describe
 from egnc.decision import decide_outliers, lower_by_more_than_rounding
 from egnc.errors import EgncError, GraphError, OptionError
-from egnc.factors import BetweenFactors, from_matrices, group_of, to_matrices
+from egnc.factors import BetweenFactors, EdgeErrors, from_matrices, group_of, to_matrices
 from egnc.gnc import GncOptions, StageReport, classify_inliers
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph, is_dim
 from egnc.index_sets import sorted_unique
@@ -757,7 +757,7 @@ class OnlineSolver:
             # The region's boundary pulls on the rest: the whole map takes the last stage's steps
             # from the local optimum.
             analysed = self._problem is None
-            last = self._solve_stage(None, self._stage_options()[0], trusted, None)
+            last, _ = self._solve_stage(None, self._stage_options()[0], trusted, None)
             return replace(
                 in_region, reports=in_region.reports + (last,), status=last.status, analysed=analysed, whole_map=True
             )
@@ -824,11 +824,13 @@ class OnlineSolver:
         reports: list[StageReport] = []
         history: list[np.ndarray] = []
         residuals: list[np.ndarray] = []
+        errors = None  # the residuals where the last stage ended, which the next starts from
         while True:
             final = not np.any(self._mu[active] < 1.0)
             if final and stage_index > 0:
                 restarted = self._start_from_lower(before, costs)
-            solution = self._solve_stage(local, tight if final else intermediate, trusted, costs)
+                errors = None if restarted else errors
+            solution, errors = self._solve_stage(local, tight if final else intermediate, trusted, costs, errors)
             reports.append(solution)
             history.append(self._mu[new_loops].copy())
             residuals.append(self._r[new_loops].copy())
@@ -884,15 +886,27 @@ class OnlineSolver:
         costs[edges] = KernelLoss(self._kernel, self._mu[edges], self._robust[edges]).cost(self._r[edges])
 
     def _solve_stage(
-        self, local: LocalProblem | None, options: SolverOptions, trusted: np.ndarray, costs: np.ndarray | None
-    ) -> StageReport:
+        self,
+        local: LocalProblem | None,
+        options: SolverOptions,
+        trusted: np.ndarray,
+        costs: np.ndarray | None,
+        errors: EdgeErrors | None = None,
+    ) -> tuple[StageReport, EdgeErrors | None]:
         """One stage at the current `mu`: the whole map (`local` None), or the local problem's
         poses, written into the estimate, with `costs` `(E,)`, the whole map's per-edge costs
-        (`_stages`), kept current."""
+        (`_stages`), kept current. `errors`: the residuals of the same problem's edges at the
+        poses the stage starts from, if known (where the stage before it ended).
+
+        Returns:
+            The stage's report, and the residuals where it ended.
+        """
         started = time.perf_counter()
         if local is None:
             loss = KernelLoss(self._kernel, self._mu.copy(), self._robust)
-            solution = solve_least_squares(self._current_problem(), self._T, loss, options, trusted=trusted)
+            solution = solve_least_squares(
+                self._current_problem(), self._T, loss, options, trusted=trusted, errors=errors, keep_errors=True
+            )
             self._T, self._r = solution.poses, solution.residual_norms
             cost = solution.cost
         else:
@@ -907,13 +921,21 @@ class OnlineSolver:
                 linear_method="direct",
             )
             loss = KernelLoss(self._kernel, self._mu[edges], self._robust[edges])
-            solution = solve_least_squares(local.problem, self._T[local.rows], loss, scaled, trusted=trusted[edges])
+            solution = solve_least_squares(
+                local.problem,
+                self._T[local.rows],
+                loss,
+                scaled,
+                trusted=trusted[edges],
+                errors=errors,
+                keep_errors=True,
+            )
             self._T[local.rows] = solution.poses
             self._r[edges] = solution.residual_norms
             self._refresh_costs(costs, edges)
             cost = whole_cost - local_cost + solution.cost
         mu_loops = self._mu[self._loops]
-        return StageReport(
+        report = StageReport(
             float(mu_loops.min(initial=np.nan)) if len(mu_loops) else np.nan,
             float(mu_loops.mean()) if len(mu_loops) else np.nan,
             float(mu_loops.max(initial=np.nan)) if len(mu_loops) else np.nan,
@@ -924,6 +946,7 @@ class OnlineSolver:
             active_edges=len(self._edges) if local is None else len(local.edges),
             cg_iterations=solution.linear.cg_iterations,
         )
+        return report, solution.errors
 
     def _local_problem(self, region: np.ndarray, neighbourhoods: Neighbourhoods) -> LocalProblem | None:
         """The local problem of `region` (pose rows); None (the whole map) when it holds most of it."""

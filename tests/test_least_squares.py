@@ -158,3 +158,24 @@ def test_cost_history_never_increases(dataset_path):
     result = solve_least_squares(problem, to_matrices(2, graph.poses))
     assert np.all(np.diff(result.cost_history) <= 0)
     assert result.cost_history[-1] == result.cost
+
+
+def test_a_solve_continued_from_kept_errors_is_the_solve_that_evaluates_them(dataset_path):
+    graph = read_g2o(dataset_path("intel.g2o"))
+    problem = Problem.from_graph(graph)
+    guess = to_matrices(2, graph.poses)
+    first = solve_least_squares(problem, guess, options=SolverOptions(max_iterations=2), keep_errors=True)
+    assert first.errors is not None
+    evaluated = problem.factors.evaluate(first.poses)
+    np.testing.assert_array_equal(first.errors.residuals, evaluated.residuals)
+    np.testing.assert_array_equal(first.errors.T_j_i, evaluated.T_j_i)
+    given = solve_least_squares(problem, first.poses, errors=first.errors)
+    fresh = solve_least_squares(problem, first.poses)
+    assert given.iterations == fresh.iterations > 0
+    np.testing.assert_array_equal(given.poses, fresh.poses)
+    np.testing.assert_array_equal(given.cost_history, fresh.cost_history)
+    assert fresh.errors is None  # not kept unless asked
+    # The given residuals are taken as they are: nothing re-evaluates them at the poses.
+    at_guess = problem.factors.evaluate(guess)
+    stale = solve_least_squares(problem, first.poses, options=SolverOptions(max_iterations=0), errors=at_guess)
+    assert stale.cost == first.cost_history[0] != first.cost
