@@ -43,12 +43,12 @@ __all__ = [
 
 def _pose(cos_t, sin_t, tx, ty) -> np.ndarray:
     """Return `[[c, -s, tx], [s, c, ty], [0, 0, 1]]` as `(..., 3, 3)` from `(...)` components."""
-    cos_t, sin_t, tx, ty = np.broadcast_arrays(cos_t, sin_t, tx, ty)
-    out = np.zeros((3, 3) + cos_t.shape)
-    out[0, 0], out[0, 1], out[0, 2] = cos_t, -sin_t, tx
-    out[1, 0], out[1, 1], out[1, 2] = sin_t, cos_t, ty
-    out[2, 2] = 1.0
-    return join(out, 2)
+    shape = np.broadcast_shapes(np.shape(cos_t), np.shape(sin_t), np.shape(tx), np.shape(ty))
+    out = np.empty(shape + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = cos_t, -sin_t, tx
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = sin_t, cos_t, ty
+    out[..., 2, :] = (0.0, 0.0, 1.0)
+    return out
 
 
 def _split_pose(T) -> tuple[np.ndarray, np.ndarray]:
@@ -207,14 +207,15 @@ def right_jacobian_inverse_components(vx, vy, w) -> tuple[np.ndarray, np.ndarray
 def rplus(T, xi) -> np.ndarray:
     """Return `T Exp(xi)`: `(..., 3, 3), (..., 3) -> (..., 3, 3)`."""
     T, xi = broadcast_batch(as_float_array(T, (3, 3), "T"), 2, as_float_array(xi, (3,), "xi"), 1)
-    r, (tx, ty) = _split_pose(T)
     cos_e, sin_e, tx_e, ty_e = exp_components(*split(xi, 1))
-    # compose(T, exp(xi)) on components, in the same order of operations.
+    # compose(T, exp(xi)) on components, in the same order of operations; T's entries are read
+    # in place (products and sums give the same bits on any memory layout).
+    r00, r01, r10, r11 = T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1]
     return _pose(
-        r[0, 0] * cos_e + r[0, 1] * sin_e,
-        r[1, 0] * cos_e + r[1, 1] * sin_e,
-        r[0, 0] * tx_e + r[0, 1] * ty_e + tx,
-        r[1, 0] * tx_e + r[1, 1] * ty_e + ty,
+        r00 * cos_e + r01 * sin_e,
+        r10 * cos_e + r11 * sin_e,
+        r00 * tx_e + r01 * ty_e + T[..., 0, 2],
+        r10 * tx_e + r11 * ty_e + T[..., 1, 2],
     )
 
 
