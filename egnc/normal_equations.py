@@ -95,8 +95,6 @@ class NormalEquationsPattern:
         if lower_only:
             pairs = pairs[pairs[:, 0] >= pairs[:, 1]]
         stride = max(num_free, 1)
-        # Unique by sorting: NumPy 2's hashing np.unique took 19x as long on these keys (0.59 ms
-        # against 0.03 ms for manhattanOlson3500's 10 000 lower blocks).
         block_keys = sorted_unique(pairs[:, 1] * stride + pairs[:, 0])
         block_col, block_row = np.divmod(block_keys, stride)
         col_start = np.searchsorted(block_keys, np.arange(num_free + 1) * stride)

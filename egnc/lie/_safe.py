@@ -42,10 +42,9 @@ def sincos_half_from_cos_sin(cos_t: np.ndarray, sin_t: np.ndarray) -> tuple[np.n
     """
     use_cos = np.asarray(cos_t >= 0.0)
     abs_sin = np.abs(sin_t)
+    c = np.asarray(np.sqrt(np.maximum(0.5 * (1.0 + cos_t), 0.0)))
     if use_cos.all():  # every angle within pi/2: the usual case, one branch
-        c = np.asarray(np.sqrt(np.maximum(0.5 * (1.0 + cos_t), 0.0)))
         return np.asarray(abs_sin / (2.0 * c)), c
-    c = np.sqrt(np.maximum(0.5 * (1.0 + cos_t), 0.0))
     s = np.sqrt(np.maximum(0.5 * (1.0 - cos_t), 0.0))
     sin_half = np.where(use_cos, abs_sin / (2.0 * np.where(use_cos, c, 1.0)), s)
     cos_half = np.where(use_cos, c, abs_sin / (2.0 * np.where(use_cos, 1.0, s)))
