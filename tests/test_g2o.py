@@ -377,23 +377,115 @@ def test_parsers_accept_exactly_the_grammar(token):
         np.testing.assert_array_equal(integers, [1, int(token)])
 
 
-@pytest.mark.parametrize("name", READABLE)
-def test_plain_files_split_as_the_line_loop_does(name, dataset_path):
-    # The dataset files have no comment: the fast path splits them, and must agree with the loop.
-    text = dataset_path(name).read_text()
+def _loop_tables(path: Path, text: str) -> tuple:
+    """What the line loop reads from `text`: `(dim, vertices, edges, fixes)`, as `_plain_tables` returns it."""
     lines = text.split("\n")
-    plain = g2o_module._split_plain_records(lines)
+    context = g2o_module._Context(path, text, len(lines))
+    dim, vertices, edges, fixes, _ = g2o_module._split_records(lines, context, skip_unknown=False)
+    tags = g2o_module._VERTEX_TAGS[dim], g2o_module._EDGE_TAGS[dim]
+    return dim, *(g2o_module._to_table(records, tag, context) for records, tag in zip((vertices, edges), tags)), fixes
+
+
+def assert_same_tables(plain: tuple, loop: tuple) -> None:
+    assert plain[0] == loop[0] and plain[3] == loop[3]
+    for ours, theirs in zip(plain[1:3], loop[1:3]):
+        for field in ("ids", "values", "lines", "toro"):
+            a, b = getattr(ours, field), getattr(theirs, field)
+            assert a.dtype == b.dtype and a.shape == b.shape
+            assert a.tobytes() == b.tobytes()  # the same bits: -0.0, subnormals and rounding included
+
+
+@pytest.mark.parametrize("name", READABLE)
+def test_plain_files_read_as_the_line_loop_reads_them(name, dataset_path):
+    # The dataset files have no comment: the fast path reads them, and must agree with the loop.
+    text = dataset_path(name).read_text()
+    plain = g2o_module._plain_tables(text, text.split("\n"))
     assert plain is not None
-    context = g2o_module._Context(dataset_path(name), text, len(lines))
-    assert plain == g2o_module._split_records(lines, context, skip_unknown=False)
+    assert_same_tables(plain, _loop_tables(dataset_path(name), text))
+
+
+TORO = "VERTEX2 0 0 0 0\nVERTEX2 1 1 0.5 0.2\nEDGE2 0 1 1 0.5 0.2 11 1 22 33 2 3\n"
 
 
 @pytest.mark.parametrize(
     "text",
-    [V2 + "FIX\n" + E2, V2 + "FIX 0\n" + E2 + V3, V2 + "VERTEX_SE2 1 0 0\n" + E2, V2 + "VERTEX_XY 1 0 0\n" + E2],
+    [
+        E2,  # no VERTEX line
+        TORO,
+        TORO.replace("VERTEX2", "VERTEX_SE2"),  # g2o vertices, TORO edges
+        V2 + "FIX 0\n" + E2 + "FIX 0 1\n",
+        "  \t" + V2 + "\n\n" + V2B + E2.rstrip("\n"),  # leading blanks, empty lines, no last newline
+        V3 + f"EDGE_SE3:QUAT 0 1 1 0 0 0 0 0 1 {info_upper(6)}\n",
+    ],
+)
+def test_plain_variants_read_as_the_line_loop_reads_them(tmp_path, text):
+    plain = g2o_module._plain_tables(text, text.split("\n"))
+    assert plain is not None
+    assert_same_tables(plain, _loop_tables(tmp_path / "graph.g2o", text))
+
+
+PLAIN_NUMBERS = ["1e+05", "-2.5E-3", ".5", "7.", "-0", "00012", "1e400", "-1e400", "1e-400", "2.5e-324", "4.9e-324",
+                 "1.7976931348623159e308", "123456789012345678901234567890", "0.1", "5e-0", "-.5e5"]  # fmt: skip
+
+
+@pytest.mark.parametrize("number", PLAIN_NUMBERS)
+def test_plain_numbers_convert_as_python_does(tmp_path, number):
+    # Over- and underflow, subnormals and long digit strings: the same float64 as the loop's `float`.
+    text = f"VERTEX_SE2 0 0 0 0\n\tVERTEX_SE2  -1 {number} 1 2\nEDGE_SE2 -1 0 {number} 0 0 {info_upper(3)}"
+    plain = g2o_module._plain_tables(text, text.split("\n"))
+    assert plain is not None
+    assert_same_tables(plain, _loop_tables(tmp_path / "graph.g2o", text))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_plain_numbers_agree_on_random_files(tmp_path, seed):
+    # Random values written in several forms (repr, %.3e, %g, integers), spaces and tabs mixed.
+    rng = np.random.default_rng(seed)
+    forms = [
+        lambda v: repr(float(v)),
+        lambda v: f"{v:.3e}",
+        lambda v: f"{v:g}",
+        lambda v: str(int(v)),
+        lambda v: f"{v:.20f}",
+    ]
+    values = rng.standard_normal(400) * 10.0 ** rng.integers(-300, 300, 400)
+    tokens = [forms[k](v) for k, v in zip(rng.integers(0, len(forms), 400), values)]
+    gaps = rng.choice([" ", "\t", "  ", " \t"], size=100)
+    vertices = "".join(f"VERTEX_SE2 {i}{gap}{' '.join(tokens[3 * i : 3 * i + 3])}\n" for i, gap in enumerate(gaps))
+    edges = "".join(f"EDGE_SE2 {i} {i + 1} 1 0 0 {info_upper(3)}\n" for i in range(99))
+    text = vertices + edges
+    plain = g2o_module._plain_tables(text, text.split("\n"))
+    assert plain is not None
+    assert_same_tables(plain, _loop_tables(tmp_path / "graph.g2o", text))
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        V2 + "FIX\n" + E2,  # a FIX without ids
+        V2 + "FIX 0\n" + E2 + V3,  # 2D and 3D
+        V2 + "VERTEX_SE2 1 0 0\n" + E2,  # a field short
+        V2 + "VERTEX_XY 1 0 0\n" + E2,  # an unknown tag
+        V2 + "VERTEX2 1 0 0 0\n" + E2,  # g2o and TORO vertices
+        V2 + E2.replace("1 0 0", "1 0 1e", 1),  # a number read in part
+        V2 + E2.replace("1 0 0", "1 0 1.2.3", 1),
+        V2 + E2.replace("1 0 0", "1 0 +1", 1),  # a leading +
+        V2 + E2.replace("1 0 0", "1 0 nan", 1),  # not plain
+        V2 + E2.replace("EDGE_SE2 0 1", "EDGE_SE2 0 1.0", 1),  # an id that is not an integer
+        V2 + E2.replace("EDGE_SE2 0 1", "EDGE_SE2 0 1234567890123456", 1),  # an id of 16 digits
+        V2 + E2.replace("EDGE_SE2 0 1", "EDGE_SE2 0 -", 1),
+        V2,  # no edge
+        "",
+    ],
 )
 def test_files_with_anything_to_report_are_left_to_the_line_loop(text):
-    assert g2o_module._split_plain_records(text.split("\n")) is None
+    assert g2o_module._plain_tables(text, text.split("\n")) is None
+
+
+def test_long_ids_are_read_by_the_line_loop(tmp_path):
+    big = 2**62 + 1  # not exact as a float64: the plain path leaves it to the loop
+    graph = read_g2o(write_text(tmp_path, f"VERTEX_SE2 {big} 0 0 0\n" + E2.replace("0 1", f"{big} 1", 1)))
+    assert graph.vertex_ids.tolist() == [1, big]
 
 
 def test_plain_fix_lines(tmp_path):

@@ -45,6 +45,7 @@ from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
 from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
 from egnc.io.numbers import check_line_characters, is_float, parse_floats, parse_id, parse_integers, shown
+from egnc.io.plain_records import plain_records
 from egnc.io.text import read_text
 from egnc.validity import (
     NO_EDGES,
@@ -88,6 +89,7 @@ _TORO_TAGS = (
     _Tag("EDGE2", "edge", 2, 2, 3 + 6, "i j dx dy dtheta I11 I12 I22 I33 I13 I23", toro=True),
 )
 _TAGS = {tag.name: tag for tag in (*_VERTEX_TAGS.values(), *_EDGE_TAGS.values(), *_TORO_TAGS)}
+_TORO_NAMES = {tag.kind: tag.name for tag in _TORO_TAGS}
 _TORO_TO_G2O_UPPER = np.array([0, 1, 4, 2, 5, 3])
 """TORO's `I11 I12 I22 I33 I13 I23` to g2o's row-major upper triangle `I11 I12 I13 I22 I23 I33`."""
 _FIX = "FIX"
@@ -103,6 +105,33 @@ class _Records:
 
     rows: list[list[str]]
     lines: list[int]
+
+
+@dataclass(frozen=True, eq=False)
+class _Table:
+    """The records of one kind (vertex or edge), converted, in file order.
+
+    Attributes:
+        ids: `(n, num_ids)` int64 vertex ids.
+        values: `(n, num_values)` float64, the fields after the ids.
+        lines: `(n,)` int64 1-based line numbers.
+        toro: `(n,)` bool, which records are TORO's (`VERTEX2`, `EDGE2`).
+    """
+
+    ids: np.ndarray
+    values: np.ndarray
+    lines: np.ndarray
+    toro: np.ndarray
+
+    @classmethod
+    def empty(cls, tag: _Tag) -> _Table:
+        """No record of `tag`'s kind."""
+        ids, lines = np.zeros((0, tag.num_ids), dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return cls(ids, np.zeros((0, tag.num_values)), lines, np.zeros(0, dtype=bool))
+
+    def tag_name(self, row: int, tag: _Tag) -> str:
+        """The tag of record `row`, of the kind of the g2o `tag`."""
+        return _TORO_NAMES[tag.kind] if self.toro[row] else tag.name
 
 
 class _Context:
@@ -155,29 +184,30 @@ def read_g2o(
     text = read_text(path)
     lines = text.split("\n")
     context = _Context(path, text, len(lines))
-    split = _split_plain_records(lines) if _NOT_PLAIN_TEXT.search(text) is None else None
-    dim, vertices, edges, fixes, unknown = split or _split_records(lines, context, skip_unknown)
-    if dim is None or not edges.rows:
-        raise context.error(f"no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
+    plain = _plain_tables(text, lines) if _NOT_PLAIN_TEXT.search(text) is None else None
+    if plain is None:
+        dim, vertex_records, edge_records, fixes, unknown = _split_records(lines, context, skip_unknown)
+        if dim is None or not edge_records.rows:
+            raise context.error(f"no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
+        vertices = _to_table(vertex_records, _VERTEX_TAGS[dim], context)
+        edges = _to_table(edge_records, _EDGE_TAGS[dim], context)
+    else:
+        (dim, vertices, edges, fixes), unknown = plain, []
 
     notes = [_describe_skipped(path, unknown)] if unknown else []
     vertex_tag, edge_tag = _VERTEX_TAGS[dim], _EDGE_TAGS[dim]
-    vertex_ids, vertex_values = _to_arrays(vertices, vertex_tag, context)
-    edge_ids, edge_values = _to_arrays(edges, edge_tag, context)
-    vertex_ids = vertex_ids[:, 0]
-    vertex_lines = np.asarray(vertices.lines, dtype=np.int64)
-    edge_lines = np.asarray(edges.lines, dtype=np.int64)
+    vertex_ids, vertex_values, vertex_lines = vertices.ids[:, 0], vertices.values, vertices.lines
+    edge_ids, edge_values, edge_lines = edges.ids, edges.values, edges.lines
     p, d = POSE_SIZE[dim], TANGENT_SIZE[dim]
     measurements = edge_values[:, :p]
     upper = edge_values[:, p:]
-    toro = np.fromiter((row[0] == "EDGE2" for row in edges.rows), dtype=bool, count=len(edges.rows))
-    if toro.any():
+    if edges.toro.any():
         upper = upper.copy()
-        upper[toro] = upper[toro][:, _TORO_TO_G2O_UPPER]
+        upper[edges.toro] = upper[edges.toro][:, _TORO_TO_G2O_UPPER]
     information_matrices = _information_from_upper(upper, d)
 
-    _check_finite(vertex_values, vertices, 1 + vertex_tag.num_ids, context)
-    _check_finite(edge_values, edges, 1 + edge_tag.num_ids, context)
+    _check_finite(vertices, vertex_tag, context)
+    _check_finite(edges, edge_tag, context)
     if dim == 3:
         _check_quaternions(vertex_values[:, 3:7], vertex_lines, context)
         _check_quaternions(measurements[:, 3:7], edge_lines, context)
@@ -328,39 +358,42 @@ def _split_records(
     return dim, vertices, edges, fixes, unknown
 
 
-def _split_plain_records(lines: list[str]) -> tuple[int | None, _Records, _Records, _Records, list[str]] | None:
-    """`_split_records` for a plain file, or None to leave it to that loop.
+def _plain_tables(text: str, lines: list[str]) -> tuple[int, _Table, _Table, _Records] | None:
+    """`_split_records` and `_to_table` at once for a plain file, or None to leave it to them.
 
     Plain means: lines of printable ASCII, spaces and tabs (no comment, no CR: `_NOT_PLAIN_TEXT`,
     checked by the caller on the whole text), only this module's tags and `FIX`, one dimension,
-    every field count right. Each of these is checked at once over all lines (a tag at a time),
-    several times faster than the loop; whatever fails is left to the loop, which finds the first
-    bad line and its message.
+    every field count right, plain numbers, ids of at most 15 digits. `egnc.io.plain_records`
+    reads them all at once, without a string per field. Each of these is checked over all
+    records; whatever fails is left to the loop, which finds the first bad line and its message.
+
+    Returns:
+        `(dim, vertices, edges, fixes)`.
     """
-    rows = [line.split() for line in lines]
-    tags = [fields[0] if fields else "" for fields in rows]
-    names = set(tags) - {""}
-    if not names <= _TAGS.keys() | {_FIX}:
+    names = (*_TAGS, _FIX)
+    records = plain_records(text, names)
+    if records is None:
         return None
-    dims = {_TAGS[name].dim for name in names - {_FIX}}
-    if len(dims) > 1:
-        return None
-    dim = dims.pop() if dims else None
-    grouped = {}
-    for name in names:
-        numbers = [number for number, tag in enumerate(tags, start=1) if tag == name]
-        group = _Records([rows[number - 1] for number in numbers], numbers)
-        lengths = set(map(len, group.rows))
-        if (min(lengths) < 2) if name == _FIX else (lengths != {1 + _TAGS[name].num_fields}):
+    present = [name for name, count in zip(names, np.bincount(records.tags, minlength=len(names))) if count]
+    tags = [_TAGS[name] for name in present if name != _FIX]
+    dims = {tag.dim for tag in tags}
+    kinds = [tag.kind for tag in tags]
+    if len(dims) != 1 or len(kinds) != len(set(kinds)) or "edge" not in kinds:
+        return None  # several dimensions, g2o and TORO records of one kind, or no edge: the loop's job
+    dim = dims.pop()
+    tables = {"vertex": _Table.empty(_VERTEX_TAGS[dim])}  # a file may have no VERTEX line
+    for tag in tags:
+        rows = np.flatnonzero(records.tags == names.index(tag.name))
+        ids = records.integers(rows, tag.num_ids) if np.all(records.counts[rows] == tag.num_fields) else None
+        if ids is None:
             return None
-        grouped[name] = group
-    kinds = [_TAGS[name].kind for name in names - {_FIX}]
-    if len(kinds) != len(set(kinds)):  # g2o and TORO records of one kind: their file order is the loop's job
+        values = records.floats(rows, tag.num_ids, tag.num_values)
+        tables[tag.kind] = _Table(ids, values, records.lines[rows], np.full(len(rows), tag.toro))
+    fix_lines = records.lines[records.tags == names.index(_FIX)].tolist()
+    fixes = _Records([lines[number - 1].split() for number in fix_lines], fix_lines)
+    if any(len(row) < 2 for row in fixes.rows):
         return None
-    empty = _Records([], [])
-    vertices = next((grouped[name] for name in names - {_FIX} if _TAGS[name].kind == "vertex"), empty)
-    edges = next((grouped[name] for name in names - {_FIX} if _TAGS[name].kind == "edge"), empty)
-    return dim, vertices, edges, grouped.get(_FIX, empty), []
+    return dim, tables["vertex"], tables["edge"], fixes
 
 
 def _describe_skipped(path: Path, unknown: list[str]) -> str:
@@ -373,8 +406,8 @@ def _describe_skipped(path: Path, unknown: list[str]) -> str:
     )
 
 
-def _to_arrays(records: _Records, tag: _Tag, context: _Context) -> tuple[np.ndarray, np.ndarray]:
-    """Convert rows to `(n, num_ids)` int64 ids and `(n, num_values)` float64 values (`egnc.io.numbers`)."""
+def _to_table(records: _Records, tag: _Tag, context: _Context) -> _Table:
+    """Convert the rows of one kind (`tag`'s, g2o or TORO) to a `_Table` (`egnc.io.numbers`)."""
     # Every row has 1 + num_fields tokens (checked by `_split_records`): take the tokens column by
     # column with list slices, which is faster than slicing each row, then transpose the numbers.
     n, k, width = len(records.rows), 1 + tag.num_ids, 1 + tag.num_fields
@@ -383,7 +416,9 @@ def _to_arrays(records: _Records, tag: _Tag, context: _Context) -> tuple[np.ndar
     values = parse_floats(list(itertools.chain.from_iterable(tokens[c::width] for c in range(k, width))))
     if ids is None or values is None:
         _raise_first_bad_field(records, tag, context)
-    return ids.reshape(tag.num_ids, n).T.copy(), values.reshape(tag.num_values, n).T.copy()
+    toro = np.fromiter((row[0] != tag.name for row in records.rows), dtype=bool, count=n)
+    lines = np.asarray(records.lines, dtype=np.int64)
+    return _Table(ids.reshape(tag.num_ids, n).T.copy(), values.reshape(tag.num_values, n).T.copy(), lines, toro)
 
 
 def _raise_first_bad_field(records: _Records, tag: _Tag, context: _Context) -> NoReturn:
@@ -408,14 +443,15 @@ def _parse_id(token: str, tag_name: str, position: int, line_number: int, contex
     return value
 
 
-def _check_finite(values: np.ndarray, records: _Records, first_field: int, context: _Context) -> None:
+def _check_finite(table: _Table, tag: _Tag, context: _Context) -> None:
     """Reject NaN and infinite values, naming the first offending line, tag and field."""
-    bad = ~np.isfinite(values)
+    bad = ~np.isfinite(table.values)
     if bad.any():
         row, column = np.argwhere(bad)[0]
         raise context.error(
-            f"{records.rows[row][0]} field {first_field + column} is {values[row, column]}, expected a finite number",
-            records.lines[row],
+            f"{table.tag_name(row, tag)} field {1 + tag.num_ids + column} is {table.values[row, column]}, "
+            "expected a finite number",
+            int(table.lines[row]),
         )
 
 
