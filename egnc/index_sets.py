@@ -2,7 +2,8 @@
 
 NumPy 2's `np.unique` hashes integers; on the tens to thousands of indices an online update
 handles, that took 4-25x as long as sorting and dropping repeats (BENCHMARKS.md, "Small-batch
-costs of an online update").
+costs of an online update"), and on the 4M vertex ids of a 1M-pose g2o file 2.3 s against
+0.09 s.
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ import numpy as np
 
 from egnc.errors import EgncError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE
+from egnc.index_sets import sorted_unique
 from egnc.io.atomic import atomic_binary_file
 
 CHECKPOINT_VERSION = 1
@@ -114,7 +115,7 @@ def _inconsistency(settings: dict, arrays: dict[str, np.ndarray]) -> str:
             return f"{name} holds a matrix that is not a rigid transform"
     if not _positive_definite(arrays["information"]):
         return "information holds a matrix that is not symmetric positive definite"
-    if len(np.unique(arrays["vertex_ids"])) != num_poses:
+    if len(sorted_unique(arrays["vertex_ids"])) != num_poses:
         return "vertex_ids repeats an id"
     edges = arrays["edges"]
     if num_edges and (edges.min() < 0 or edges.max() >= num_poses):

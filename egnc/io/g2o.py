@@ -41,6 +41,7 @@ from egnc.checks import check_bool, check_choice, check_instance
 from egnc.connectivity import describe_ids, hold_isolated_fixed, isolated_vertices, require_connected
 from egnc.errors import EgncWarning, G2oFormatError, GraphError, OptionError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.index_sets import sorted_unique
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
 from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
@@ -216,7 +217,7 @@ def read_g2o(
     information_matrices, repair_note = _positive_definite(information_matrices, edge_lines, information, context)
     notes += [repair_note] if repair_note else []
 
-    all_ids = np.unique(np.concatenate((vertex_ids, edge_ids.ravel())))
+    all_ids = sorted_unique(np.concatenate((vertex_ids, edge_ids.ravel())))
     fixed = _fixed_mask(fixes, all_ids, context)
     edge_rows = np.searchsorted(all_ids, edge_ids)
     isolated = isolated_vertices(len(all_ids), edge_rows)

@@ -56,6 +56,7 @@ from egnc.checks import check_instance
 from egnc.connectivity import connected_components, describe_components, require_connected
 from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.index_sets import sorted_unique
 from egnc.initialize import initialize_poses
 from egnc.io.atomic import atomic_text_file
 from egnc.io.numbers import check_line_characters, format_floats, is_float, parse_id, shown
@@ -499,7 +500,7 @@ def _build_graph(log: IrlLog) -> PoseGraph:
     ids = log.edge_ids.ravel()
     if log.prior is not None:
         ids = np.append(ids, log.prior.vertex_id)
-    vertex_ids = np.unique(ids)
+    vertex_ids = sorted_unique(ids)
     rows = np.searchsorted(vertex_ids, log.edge_ids)
     measurements = _from_irl_poses(log.dim, log.measurements)
     information = _information(log.covariances)
