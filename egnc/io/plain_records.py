@@ -2,11 +2,11 @@
 
 A plain file (printable ASCII, fields separated by spaces and tabs, no comment and no CR; the
 caller checks that) holds one record a line: a tag, then numbers. Read line by line, Python
-makes a string of every field and converts each one, which is most of the time of reading a
-large map (a 100 000-pose g2o file: 2.3 s of splitting and converting). Here the text is read as
-bytes once: where each field starts and ends and on which line, which field heads its line, and
-every other field converted by one NumPy call (`np.fromstring`, whose text conversion gives the
-same float64 as Python's `float`).
+makes a list of strings for every line, and on a large map that is most of the reading
+(BENCHMARKS.md, "Reading a large g2o file"). Here the text is read as bytes once: where each
+field starts and ends and on which line, which field heads its line, and every other field
+converted by one NumPy call (`np.fromstring`, whose text conversion gives the same float64 as
+Python's `float`).
 
 The numbers must be plain by `egnc.io.numbers`' grammar: made of `0-9 . e E + -`, none starting
 with `+`, and each a whole number (a field the conversion reads only in part, such as `1e` or
