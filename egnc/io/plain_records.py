@@ -46,7 +46,7 @@ class PlainRecords:
     counts: np.ndarray
     _first: np.ndarray  # (R,) index in _values of each record's first field after the tag
     _values: np.ndarray  # (F,) float64, every field after a tag
-    _data: np.ndarray  # the text's bytes, and where each of those F fields starts and ends in it
+    _data: np.ndarray  # the text's bytes (padded, `_windows`), and where each of those F fields starts and ends
     _starts: np.ndarray
     _ends: np.ndarray
 
@@ -82,7 +82,8 @@ def plain_records(text: str, tags: Sequence[str]) -> PlainRecords | None:
         The records, or None where a line's first field is not one of `tags`, a later field is
         not a plain number, or the text holds no record.
     """
-    data = np.frombuffer(text.encode("ascii"), dtype=np.uint8)
+    padding = max(EXACT_INTEGER_DIGITS, *map(len, tags))  # every window of `_windows` ends inside `data`
+    data = np.frombuffer(text.encode("ascii") + b" " * padding, dtype=np.uint8)
     separator = (data == _SPACE) | (data == _TAB) | (data == _NEWLINE)
     change = np.diff(separator.view(np.int8), prepend=np.int8(1), append=np.int8(1))
     starts, ends = np.flatnonzero(change == -1), np.flatnonzero(change == 1)  # of every field
@@ -126,6 +127,6 @@ def _tag_indices(data: np.ndarray, starts: np.ndarray, ends: np.ndarray, tags: S
 
 
 def _windows(data: np.ndarray, width: int, starts: np.ndarray) -> np.ndarray:
-    """`(K, width)` the bytes `data[starts[k] : starts[k] + width]`, padded with spaces past the end."""
-    padded = np.concatenate((data, np.full(width, _SPACE, dtype=np.uint8)))
-    return np.lib.stride_tricks.sliding_window_view(padded, width)[starts]
+    """`(K, width)` the bytes `data[starts[k] : starts[k] + width]`; `data` ends in at least
+    `width` spaces, so every window lies inside it."""
+    return np.lib.stride_tricks.sliding_window_view(data, width)[starts]
