@@ -34,6 +34,13 @@ rounds alternated until `MAX_ROUNDS` (grids of 2000 to 100 000 poses). Should a 
 still come back, the rounds stop there and keep the one of lowest truncated cost
 (`truncated_cost`) among those of the cycle, with its least-squares map.
 
+One analysis: every round solves one least-squares problem (`RoundProblem`) over its accepted
+edges and every loop closure whose Geman-McClure weight (the graduated kernel at `mu = 1`) is at
+least `SolverOptions.trust_weight` at the rounds' start, the loops weighted 0 while rejected. The
+loops re-admission brings back come from that set (the set a GNC stage's last preconditioner
+holds), so the rounds share one pattern and one symbolic analysis instead of one per round; a
+round that accepts a loop outside it builds the problem again over both.
+
 Under the linear-Gaussian model the false-alarm rate per honest loop is below `1 - q` for the
 test of step 2 (an included loop's `r^2` is stochastically smaller than chi-square: it pulls the
 map towards itself) and `1 - q_readmit` for step 3, where `q_readmit` is raised on graphs of
@@ -72,7 +79,7 @@ from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions, StageCallback, StageKind, StageReport, StageStart, classify_inliers
 from egnc.graph import PoseGraph
-from egnc.kernels import chi2_quantile
+from egnc.kernels import chi2_quantile, make_kernel
 from egnc.least_squares import (
     NUMERICAL_FAILURE,
     IterationCallback,
@@ -82,6 +89,7 @@ from egnc.least_squares import (
     solve_least_squares,
 )
 from egnc.linear_solvers import Factorization, NotPositiveDefiniteError
+from egnc.losses import FixedWeightLoss
 from egnc.marginals import ReachEstimate, covariance_solver, innovations
 
 MAX_ROUNDS = 5
@@ -138,6 +146,7 @@ def readmitted(
     r: np.ndarray,
     quantile: float,
     information: Factorization | None = None,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """`(E,)` bool: the `rejected` edges that the map of `problem` agrees with.
 
@@ -157,6 +166,8 @@ def readmitted(
         quantile: chi-square quantile of the test.
         information: a factorization of `problem`'s information at `poses` (`round_information`);
             None factorizes it here.
+        weights: `(E_problem,)` weight of each of `problem`'s edges in its information (0: an edge
+            of its pattern left out, `RoundProblem`); None: 1.
     """
     threshold = chi2_quantile(quantile, factors.information.shape[-1])
     # The innovation statistic is at most r^2 (its covariance adds the map's to the loop's own):
@@ -168,7 +179,7 @@ def readmitted(
     if not len(candidates):
         return passed
     try:
-        covariance_solve = covariance_solver(problem, poses) if information is None else information
+        covariance_solve = covariance_solver(problem, poses, weights) if information is None else information
         estimate = ReachEstimate.of(problem)  # whether exporting the factor can pay (egnc.marginals)
         if _all_agree(problem, poses, factors, candidates, (covariance_solve, estimate), threshold):
             return rejected.copy()
@@ -345,6 +356,40 @@ def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> n
 
 
 @dataclass(frozen=True, eq=False)
+class RoundProblem:
+    """The least-squares problem of the decision rounds, over a superset of their accepted edges.
+
+    A round weights its accepted edges 1 and the others 0, so the rounds share one pattern and
+    its symbolic analysis while their accepted sets stay inside it.
+
+    Attributes:
+        edges: `(E,)` bool, the graph's edges in `problem`.
+        problem: least squares over those edges.
+    """
+
+    edges: np.ndarray
+    problem: Problem
+
+    @classmethod
+    def over(cls, graph: PoseGraph, factors: BetweenFactors, edges: np.ndarray, linear_solver: str) -> RoundProblem:
+        """The problem over the `edges` `(E,)` of `graph` (whose factors are `factors`)."""
+        edges = edges.copy()
+        return cls(edges, Problem.from_graph(graph.subgraph_edges(edges), linear_solver, factors.subset(edges)))
+
+    def weights(self, inliers: np.ndarray) -> np.ndarray:
+        """`(E_problem,)` weight of each of the problem's edges: 1 where `inliers` `(E,)`, else 0."""
+        return inliers[self.edges].astype(np.float64)
+
+    def solve(
+        self, poses: np.ndarray, inliers: np.ndarray, options: SolverOptions, on_iteration: IterationCallback | None
+    ) -> SolverResult:
+        """Least squares of the `inliers` `(E,)` edges from `poses` `(N, n, n)`, each step direct."""
+        every_edge = np.ones(len(self.problem.factors.edges), dtype=bool)  # the direct path, zeros included
+        loss = FixedWeightLoss(self.weights(inliers))
+        return solve_least_squares(self.problem, poses, loss, options, on_iteration, trusted=every_edge)
+
+
+@dataclass(frozen=True, eq=False)
 class Decision:
     """Outcome of `decide_outliers`.
 
@@ -454,12 +499,21 @@ def decide_outliers(
     ever_readmitted = np.zeros(graph.num_edges, dtype=bool)
     solved: dict[bytes, int] = {}  # classification -> its round in `rounds`
     rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []  # inliers, poses, r, truncated cost
+    # The rounds' problem: the accepted edges and every loop the graduated kernel's target (mu = 1)
+    # still trusts here, the loops re-admission brings back (module docstring, "One analysis").
+    target_weight = make_kernel("sig", c=gnc_options.c).weight(r, 1.0)
+    members = inliers | (robust & (target_weight >= solver_options.trust_weight))
+    system: RoundProblem | None = None
     for _ in range(MAX_ROUNDS):
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
             break
         started = time.perf_counter()
-        problem = Problem.from_graph(graph.subgraph_edges(inliers), linear_solver, factors.subset(inliers))
-        refined = solve_least_squares(problem, poses, None, solver_options, on_iteration)
+        if system is None or np.any(inliers & ~system.edges):
+            members |= inliers
+            system = None  # freed before the next is built
+            system = RoundProblem.over(graph, factors, members, linear_solver)
+        problem = system.problem
+        refined = system.solve(poses, inliers, solver_options, on_iteration)
         poses = refined.poses
         r = factors.whitened_norms(factors.residuals(poses))
         solved[np.packbits(inliers).tobytes()] = len(rounds)
@@ -469,7 +523,8 @@ def decide_outliers(
             # A loop the innovation test admitted is held to that test's quantile from then on
             # (module docstring, "Hysteresis").
             decided |= ever_readmitted & classify_inliers(r, robust, d, strict)
-            back = readmitted(problem, poses, factors, ~inliers, r, readmit_at, round_information(problem, refined))
+            information = round_information(problem, refined)
+            back = readmitted(problem, poses, factors, ~inliers, r, readmit_at, information, system.weights(inliers))
             problem.step_solver.discard_factorization()  # not held while the next round builds its problem
             ever_readmitted |= back
             decided = (decided & inliers) | back

@@ -119,15 +119,18 @@ class ReachEstimate:
         return float(self.entries[list(reached)].sum() / self.entries.sum())
 
 
-def covariance_solver(problem: Problem, poses: np.ndarray) -> Factorization:
-    """The factorization of the unweighted information `H` of `problem` at `poses` `(N, n, n)`: `B -> H^-1 B`.
+def covariance_solver(problem: Problem, poses: np.ndarray, weights: np.ndarray | None = None) -> Factorization:
+    """The factorization of the information `H` of `problem` at `poses` `(N, n, n)`: `B -> H^-1 B`.
+
+    `weights`: `(E,)` weight of each of `problem`'s edges in `H` (0 leaves an edge out); None: 1.
 
     Raises:
         NotPositiveDefiniteError: `H` cannot be factorized (a degenerate solution).
     """
     factors = problem.factors
     linearization = factors.linearize(poses)
-    data, _ = problem.pattern.assemble(linearization, factors.information, np.ones(len(factors.edges)))
+    weights = np.ones(len(factors.edges)) if weights is None else weights
+    data, _ = problem.pattern.assemble(linearization, factors.information, weights)
     return problem.linear_solver.factorize(data)
 
 

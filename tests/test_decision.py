@@ -17,6 +17,7 @@ from egnc.datasets import add_false_loops, grid_world
 from egnc.decision import (
     MAX_ROUNDS,
     REUSED_DAMPING,
+    RoundProblem,
     decide_outliers,
     readmit_quantile,
     round_information,
@@ -293,7 +294,7 @@ def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch
     graph, robust = corrupted.graph, corrupted.graph.is_loop_closure
     solved = []  # (classification, truncated cost at its least-squares map) of every round
 
-    def readmit_all(problem, poses, factors, rejected, r, quantile, information=None):
+    def readmit_all(problem, poses, factors, rejected, r, quantile, information=None, weights=None):
         solved.append((~rejected, truncated_cost(r, robust, 3, 0.99)))
         return rejected
 
@@ -350,6 +351,58 @@ def test_a_rounds_last_step_factorization_gives_the_innovations_at_its_solution(
     np.testing.assert_allclose(reused, fresh, rtol=0, atol=1e-7 * np.abs(fresh).max())
     joint = [float(e.ravel() @ np.linalg.solve(S, e.ravel())) for S in (reused, fresh)]
     assert joint[0] == pytest.approx(joint[1], rel=1e-6)  # the statistic re-admission tests
+
+
+@pytest.mark.parametrize("backend", FACTOR_BACKENDS)
+def test_a_round_problem_over_more_edges_solves_and_covaries_as_its_accepted_edges_alone(backend):
+    # The rounds solve on a superset of their accepted edges, the others weighted 0: the same
+    # least-squares map, the same information factorization and the same innovations as a problem
+    # built from the accepted edges only.
+    world = grid_world(2, 300, seed=8, noise_scale=0.5)
+    graph = add_false_loops(world.graph, 10, seed=3, reference_poses=world.graph.poses).graph
+    accepted = np.ones(graph.num_edges, dtype=bool)
+    accepted[np.flatnonzero(graph.is_loop_closure)[-16:]] = False  # the false loops and some true ones
+    factors = BetweenFactors.from_graph(graph)
+    start = to_matrices(2, graph.poses)
+    alone = Problem.from_graph(graph.subgraph_edges(accepted), backend)
+    expected = solve_least_squares(alone, start, None, SolverOptions())
+    system = RoundProblem.over(graph, factors, np.ones(graph.num_edges, dtype=bool), backend)
+    solved = system.solve(start, accepted, SolverOptions(), None)
+    assert solved.iterations == expected.iterations and solved.status == expected.status == 1
+    np.testing.assert_allclose(solved.poses, expected.poses, rtol=0, atol=1e-9)
+    assert solved.cost == pytest.approx(expected.cost, rel=1e-12)
+    information = round_information(system.problem, solved)
+    assert information is not None
+    loops = factors.subset(~accepted)
+    reused = innovations(system.problem, solved.poses, loops, information)[1]
+    weighted = marginals_module.covariance_solver(system.problem, solved.poses, system.weights(accepted))
+    fresh = innovations(alone, expected.poses, loops)[1]
+    np.testing.assert_allclose(reused, fresh, rtol=0, atol=1e-6 * np.abs(fresh).max())
+    np.testing.assert_allclose(
+        innovations(system.problem, solved.poses, loops, weighted)[1], fresh, rtol=0, atol=1e-7 * np.abs(fresh).max()
+    )
+
+
+def test_rounds_that_readmit_loops_share_one_analysis(monkeypatch):
+    # The rounds' problem holds every loop the final kernel still trusts at their start, so a
+    # loop re-admitted later is in its pattern already: one problem (and one symbolic analysis)
+    # serves every round.
+    world = grid_world(2, 400, seed=2, noise_scale=0.5)
+    corrupted = add_false_loops(world.graph, 20, seed=4, reference_poses=solve(world.graph, "l2").graph.poses)
+    graph, robust = corrupted.graph, corrupted.graph.is_loop_closure
+    start = solve(graph.subgraph_edges(~corrupted.is_outlier), "l2").graph.poses  # the outlier-free map
+    factors = BetweenFactors.from_graph(graph)
+    inliers = ~corrupted.is_outlier
+    inliers[np.flatnonzero(robust & ~corrupted.is_outlier)[:30]] = False  # true loops the first round lacks
+    built = []
+    over = decision_module.RoundProblem.over
+    monkeypatch.setattr(decision_module.RoundProblem, "over", lambda *args: built.append(args) or over(*args))
+    decision = decide_outliers(
+        graph, to_matrices(2, start), robust, SolverOptions(), GncOptions(), "auto", factors, inliers=inliers
+    )
+    assert len(decision.reports) >= 2 and decision.settled
+    assert np.array_equal(decision.inliers, ~corrupted.is_outlier)  # the 30 came back, no false loop did
+    assert len(built) == 1
 
 
 def test_a_round_that_did_not_stop_on_its_cost_test_factorizes_afresh():
