@@ -35,11 +35,10 @@ still come back, the rounds stop there and keep the one of lowest truncated cost
 (`truncated_cost`) among those of the cycle, with its least-squares map.
 
 One analysis: every round solves one least-squares problem (`RoundProblem`) over its accepted
-edges and every loop closure whose Geman-McClure weight (the graduated kernel at `mu = 1`) is at
-least `SolverOptions.trust_weight` at the rounds' start, the loops weighted 0 while rejected. The
-loops re-admission brings back come from that set (the set a GNC stage's last preconditioner
-holds), so the rounds share one pattern and one symbolic analysis instead of one per round; a
-round that accepts a loop outside it builds the problem again over both.
+edges and every rejected loop that step 3 could re-admit at the rounds' start (`_statistic_floor`
+within the threshold), weighted 0 while rejected. The loops later rounds take back come from that
+set, so the rounds share one pattern and one symbolic analysis instead of one per round; a round
+that accepts a loop outside it builds the problem again over both.
 
 Under the linear-Gaussian model the false-alarm rate per honest loop is below `1 - q` for the
 test of step 2 (an included loop's `r^2` is stochastically smaller than chi-square: it pulls the
@@ -79,7 +78,7 @@ from egnc.errors import SolverError
 from egnc.factors import BetweenFactors, to_matrices
 from egnc.gnc import GncOptions, StageCallback, StageKind, StageReport, StageStart, classify_inliers
 from egnc.graph import PoseGraph
-from egnc.kernels import chi2_quantile, make_kernel
+from egnc.kernels import chi2_quantile
 from egnc.least_squares import (
     NUMERICAL_FAILURE,
     IterationCallback,
@@ -499,10 +498,11 @@ def decide_outliers(
     ever_readmitted = np.zeros(graph.num_edges, dtype=bool)
     solved: dict[bytes, int] = {}  # classification -> its round in `rounds`
     rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []  # inliers, poses, r, truncated cost
-    # The rounds' problem: the accepted edges and every loop the graduated kernel's target (mu = 1)
-    # still trusts here, the loops re-admission brings back (module docstring, "One analysis").
-    target_weight = make_kernel("sig", c=gnc_options.c).weight(r, 1.0)
-    members = inliers | (robust & (target_weight >= solver_options.trust_weight))
+    # The rounds' problem: the accepted edges and every rejected loop that re-admission could
+    # take back at these poses (module docstring, "One analysis").
+    members = inliers.copy()
+    outside = np.flatnonzero(robust & ~inliers)
+    members[outside] = _statistic_floor(factors.subset(outside), poses) <= chi2_quantile(readmit_at, d)
     system: RoundProblem | None = None
     for _ in range(MAX_ROUNDS):
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
