@@ -381,7 +381,8 @@ def solve(
         decision = context.decide(poses, classify_inliers(robust_r, robust, graph.tangent_dim, gnc_options), first)
         stages += decision.reports
         candidates: dict[str, Decision] = {first: decision}
-        if runs is not None and runs.contradicted(decision.inliers):  # the runs' map may be bent
+        bent = runs is not None and runs.contradicted(decision.inliers)  # the runs' map may be bent
+        if bent:
             other, reports = graduated_decision(context, initial, "guess", graduate)
             stages += reports
             if other is not None:
@@ -389,7 +390,9 @@ def solve(
         if gnc_options.chordal_start:
             trusted = ~robust | (outcome.weights >= options.trust_weight)
             best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-            other, reports = chordal_decision(context, best, trusted)
+            # After a runs start the chordal start classifies at its chordal map (module docstring).
+            runs_map = runs.poses if runs is not None and not bent else None
+            other, reports = chordal_decision(context, best, trusted, runs_map)
             stages += reports
             if other is not None:
                 candidates["chordal"] = other

@@ -34,7 +34,11 @@ pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 
 On a graph with false loops and a good guess, this costs one chordal solve and changes nothing;
 on a clean graph with a drifted guess it returns the least-squares optimum with every loop
-accepted.
+accepted. Where the GNC stage began at the runs start's chordal map (`egnc.regroup`: the known
+inliers and the loops in runs, a map the decision did not contradict), that map is the one
+classified in step 1: it reads no guess either, and a second chordal solve over the trusted
+edges found no loop to win back that this one misses (BENCHMARKS.md, issue 18, twenty-seventh
+session).
 
 Both chordal maps above are solved over the edges the GNC stage trusted, so a true loop that the
 stage switched off from a drifted guess stays out of them, and where such loops are many the
@@ -83,7 +87,7 @@ the loop closures (each rejected loop's fill-in enters its chordal system; modul
 
 
 def chordal_decision(
-    context: StartContext, to_beat: Decision, trusted: np.ndarray
+    context: StartContext, to_beat: Decision, trusted: np.ndarray, chordal_map: np.ndarray | None = None
 ) -> tuple[Decision | None, tuple[StageReport, ...]]:
     """The decision started from the chordal initialization, unless it cannot beat `to_beat` (module docstring).
 
@@ -92,6 +96,8 @@ def chordal_decision(
         to_beat: the decision started from the initial guess.
         trusted: `(E,)` bool, the edges the chordal initialization uses: those the GNC stage
             had not switched off (IRLS weight at least `SolverOptions.trust_weight`).
+        chordal_map: `(N, n, n)` a chordal map already solved (the runs start's), used instead
+            of solving one over `trusted`.
 
     Returns:
         `(decision, reports)`: the chordal start's decision, or None where it stopped early (no
@@ -100,7 +106,7 @@ def chordal_decision(
     """
     graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
-    poses = context.chordal_poses(trusted)
+    poses = context.chordal_poses(trusted) if chordal_map is None else chordal_map
     if poses is None:  # a chordal system the backend cannot factorize: no second start
         return None, ()
     r = factors.whitened_norms(factors.residuals(poses))

@@ -93,6 +93,26 @@ def test_the_chordal_start_wins_back_a_true_loop_after_the_runs_start(dataset_pa
     assert result.truncated_cost < without.truncated_cost
 
 
+def test_after_the_runs_start_the_chordal_start_classifies_at_its_map(dataset_path, monkeypatch):
+    # The GNC stage began at the runs start's chordal map, and the decision did not contradict
+    # its runs: the chordal start classifies there instead of solving a chordal map of its own.
+    graph = egnc.read_g2o(dataset_path("kitti_00.g2o"))
+    reference = least_squares_optimum(graph, "auto").graph.poses
+    corrupted = add_false_loops(graph, 10, seed=1, reference_poses=reference)
+    chordal_maps = []
+    solved = StartContext.chordal_poses
+
+    def counted(self, keep):
+        chordal_maps.append(keep)
+        return solved(self, keep)
+
+    monkeypatch.setattr(StartContext, "chordal_poses", counted)
+    result = solve(corrupted.graph)
+    assert result.stages[0].start == "runs" and result.start == "chordal"
+    assert len(chordal_maps) == 1  # the runs start's
+    np.testing.assert_array_equal(corrupted.graph.is_loop_closure & ~result.inliers, corrupted.is_outlier)
+
+
 def test_least_squares_rejects_nothing_and_its_covariances_use_every_edge():
     world = grid_world(2, 200, seed=6, noise_scale=0.3)
     clean = solve(world.graph, "l2")
