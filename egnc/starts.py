@@ -36,9 +36,9 @@ On a graph with false loops and a good guess, this costs one chordal solve and c
 on a clean graph with a drifted guess it returns the least-squares optimum with every loop
 accepted. Where the GNC stage began at the runs start's chordal map (`egnc.regroup`: the known
 inliers and the loops in runs, a map the decision did not contradict), that map is the one
-classified in step 1: it reads no guess either, and a second chordal solve over the trusted
-edges found no loop to win back that this one misses (BENCHMARKS.md, issue 18, twenty-seventh
-session).
+classified in step 1: it reads no guess either, and it spares a second chordal solve (on the
+shared files every decision stayed the same but one, which rejects one false loop more;
+BENCHMARKS.md, issue 18, twenty-seventh session).
 
 Both chordal maps above are solved over the edges the GNC stage trusted, so a true loop that the
 stage switched off from a drifted guess stays out of them, and where such loops are many the
