@@ -390,7 +390,7 @@ def solve(
         if gnc_options.chordal_start:
             trusted = ~robust | (outcome.weights >= options.trust_weight)
             best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-            # After a runs start the chordal start classifies at its chordal map (module docstring).
+            # After a runs start the chordal start classifies at the runs' chordal map (egnc.starts).
             runs_map = runs.poses if runs is not None and not bent else None
             other, reports = chordal_decision(context, best, trusted, runs_map)
             stages += reports

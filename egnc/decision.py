@@ -525,7 +525,7 @@ def decide_outliers(
             decided |= ever_readmitted & classify_inliers(r, robust, d, strict)
             information = round_information(problem, refined)
             back = readmitted(problem, poses, factors, ~inliers, r, readmit_at, information, system.weights(inliers))
-            problem.step_solver.discard_factorization()  # not held while the next round builds its problem
+            problem.step_solver.discard_factorization()  # not held while a new round problem is built
             ever_readmitted |= back
             decided = (decided & inliers) | back
         reports.append(least_squares_report(refined, started, int(inliers.sum()), "decision", start))
