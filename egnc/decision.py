@@ -34,11 +34,14 @@ rounds alternated until `MAX_ROUNDS` (grids of 2000 to 100 000 poses). Should a 
 still come back, the rounds stop there and keep the one of lowest truncated cost
 (`truncated_cost`) among those of the cycle, with its least-squares map.
 
-One analysis: every round solves one least-squares problem (`RoundProblem`) over its accepted
-edges and every rejected loop that step 3 could re-admit at the rounds' start (`_statistic_floor`
-within the threshold), weighted 0 while rejected. The loops later rounds take back come from that
-set, so the rounds share one pattern and one symbolic analysis instead of one per round; a round
-that accepts a loop outside it builds the problem again over both.
+One analysis: on a system of at least `SHARED_ANALYSIS_MIN_UNKNOWNS` unknowns every round solves
+one least-squares problem (`RoundProblem`) over its accepted edges and every rejected loop that
+step 3 could re-admit at the rounds' start (`_statistic_floor` within the threshold), weighted 0
+while rejected. The loops later rounds take back come from that set, so the rounds share one
+pattern and one symbolic analysis instead of one per round; a round that accepts a loop outside
+it builds the problem again over both. On a smaller system each round's problem holds its
+accepted edges only: its analysis takes milliseconds, while the extra loops' fill-in slows every
+factorization of the rounds.
 
 Under the linear-Gaussian model the false-alarm rate per honest loop is below `1 - q` for the
 test of step 2 (an included loop's `r^2` is stochastically smaller than chi-square: it pulls the
@@ -93,6 +96,11 @@ from egnc.marginals import ReachEstimate, covariance_solver, innovations
 
 MAX_ROUNDS = 5
 """Refine-and-decide rounds before the classification is taken as it stands."""
+
+SHARED_ANALYSIS_MIN_UNKNOWNS = 50_000
+"""Systems of at least this many unknowns share one round problem over a superset of the accepted
+edges (module docstring, "One analysis"); smaller ones solve each round over its accepted edges
+alone, where an analysis costs less than the fill-in the extra loops add to every factorization."""
 
 READMIT_BATCH = 64
 """Rejected loops whose innovation statistics are computed together (one multi-column solve)."""
@@ -498,18 +506,19 @@ def decide_outliers(
     ever_readmitted = np.zeros(graph.num_edges, dtype=bool)
     solved: dict[bytes, int] = {}  # classification -> its round in `rounds`
     rounds: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []  # inliers, poses, r, truncated cost
-    # The rounds' problem: the accepted edges and every rejected loop that re-admission could
-    # take back at these poses (module docstring, "One analysis").
+    # The rounds' problem (module docstring, "One analysis"): on a large system, the accepted
+    # edges and every rejected loop that re-admission could take back at these poses.
+    shared = d * graph.num_poses >= SHARED_ANALYSIS_MIN_UNKNOWNS
     members = inliers.copy()
-    outside = np.flatnonzero(robust & ~inliers)
+    outside = np.flatnonzero(robust & ~inliers) if shared else np.zeros(0, dtype=np.int64)
     members[outside] = _statistic_floor(factors.subset(outside), poses) <= chi2_quantile(readmit_at, d)
     system: RoundProblem | None = None
     for _ in range(MAX_ROUNDS):
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
             break
         started = time.perf_counter()
-        if system is None or np.any(inliers & ~system.edges):
-            members |= inliers
+        if system is None or np.any(inliers & ~system.edges) or not (shared or np.array_equal(inliers, system.edges)):
+            members = members | inliers if shared else inliers
             system = None  # freed before the next is built
             system = RoundProblem.over(graph, factors, members, linear_solver)
         problem = system.problem
