@@ -383,6 +383,11 @@ class RoundProblem:
         edges = edges.copy()
         return cls(edges, Problem.from_graph(graph.subgraph_edges(edges), linear_solver, factors.subset(edges)))
 
+    def serves(self, inliers: np.ndarray, exactly: bool) -> bool:
+        """Whether a round that accepts `inliers` `(E,)` is solved on this problem: its edges hold
+        them, or are exactly them (`exactly`)."""
+        return np.array_equal(inliers, self.edges) if exactly else not np.any(inliers & ~self.edges)
+
     def weights(self, inliers: np.ndarray) -> np.ndarray:
         """`(E_problem,)` weight of each of the problem's edges: 1 where `inliers` `(E,)`, else 0."""
         return inliers[self.edges].astype(np.float64)
@@ -510,15 +515,16 @@ def decide_outliers(
     # edges and every rejected loop that re-admission could take back at these poses.
     shared = d * graph.num_poses >= SHARED_ANALYSIS_MIN_UNKNOWNS
     members = inliers.copy()
-    outside = np.flatnonzero(robust & ~inliers) if shared else np.zeros(0, dtype=np.int64)
-    members[outside] = _statistic_floor(factors.subset(outside), poses) <= chi2_quantile(readmit_at, d)
+    if shared:
+        outside = np.flatnonzero(robust & ~inliers)
+        members[outside] = _statistic_floor(factors.subset(outside), poses) <= chi2_quantile(readmit_at, d)
     system: RoundProblem | None = None
     for _ in range(MAX_ROUNDS):
         if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
             break
         started = time.perf_counter()
-        if system is None or np.any(inliers & ~system.edges) or not (shared or np.array_equal(inliers, system.edges)):
-            members = members | inliers if shared else inliers
+        members = members | inliers if shared else inliers
+        if system is None or not system.serves(inliers, exactly=not shared):
             system = None  # freed before the next is built
             system = RoundProblem.over(graph, factors, members, linear_solver)
         problem = system.problem
