@@ -165,6 +165,9 @@ class SolverResult:
         linear: direct solves, CG solves and iterations, CG fallbacks (`egnc.step_solver`).
         step_damping: the LM damping `lambda` (relative to `H`'s diagonal) of the last accepted
             step; 0 for Gauss-Newton and when no step was accepted.
+        next_damping: the LM damping the solve would have tried next, the `initial_damping` that
+            continues it from `poses` (a large map's smoothest modes lose whole steps to a
+            restart at a larger one); 0 for Gauss-Newton.
         errors: the residuals at `poses` with what a linearization there reuses
             (`BetweenFactors.evaluate`), when the solve was asked to keep them (`keep_errors`),
             else None.
@@ -182,6 +185,7 @@ class SolverResult:
     timings: dict[str, float] = field(default_factory=dict)
     linear: LinearStatistics = field(default_factory=LinearStatistics)
     step_damping: float = 0.0
+    next_damping: float = 0.0
     errors: EdgeErrors | None = None
 
     @property
@@ -416,5 +420,6 @@ def solve_least_squares(
         timings=dict(clock.totals),
         linear=steps.statistics,
         step_damping=step_damping,
+        next_damping=damping if options.method == "lm" else 0.0,
         errors=errors if keep_errors else None,
     )

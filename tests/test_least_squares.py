@@ -179,3 +179,21 @@ def test_a_solve_continued_from_kept_errors_is_the_solve_that_evaluates_them(dat
     at_guess = problem.factors.evaluate(guess)
     stale = solve_least_squares(problem, first.poses, options=SolverOptions(max_iterations=0), errors=at_guess)
     assert stale.cost == first.cost_history[0] != first.cost
+
+
+@pytest.mark.parametrize("stop_after", [1, 3])
+def test_a_solve_continued_at_its_next_damping_is_the_uninterrupted_solve(dataset_path, stop_after):
+    graph = read_g2o(dataset_path("manhattanOlson3500.g2o"))
+    problem = Problem.from_graph(graph)
+    guess = to_matrices(2, graph.poses)
+    whole = solve_least_squares(problem, guess, options=SolverOptions(max_iterations=stop_after + 3))
+    first = solve_least_squares(problem, guess, options=SolverOptions(max_iterations=stop_after))
+    assert 0 < first.next_damping < SolverOptions().initial_damping  # LM lowered it after good steps
+    rest = solve_least_squares(
+        problem, first.poses, options=SolverOptions(max_iterations=3, initial_damping=first.next_damping)
+    )
+    np.testing.assert_allclose(rest.cost_history, whole.cost_history[stop_after:], rtol=1e-12)
+    np.testing.assert_allclose(rest.poses, whole.poses, atol=1e-10)
+    restarted = solve_least_squares(problem, first.poses, options=SolverOptions(max_iterations=3))
+    assert not np.allclose(restarted.cost_history, whole.cost_history[stop_after:], rtol=1e-12, atol=0)
+    assert solve_least_squares(problem, guess, options=SolverOptions(method="gn", max_iterations=1)).next_damping == 0
