@@ -489,7 +489,8 @@ def _stopped_loosely(solved: SolverResult, tolerance: float) -> bool:
 
 
 def _continued(first: SolverResult, then: SolverResult) -> SolverResult:
-    """The solve `then`, which went on from where `first` stopped, counted from `first`'s start."""
+    """The solve `then`, which went on from where `first` stopped, with the iterations, linear
+    solves, cost history and time of both."""
     return replace(
         then,
         cost_history=np.concatenate([first.cost_history, then.cost_history[1:]]),
@@ -615,11 +616,10 @@ def decide_outliers(
             break
         first = solved.get(np.packbits(decided).tobytes())
         if first is not None:  # a cycle: keep its classification of lowest truncated cost
-            inliers, refined, r, _ = min(rounds[first:], key=lambda solved_round: solved_round[3])
-            if _stopped_loosely(refined, solver_options.rel_cost_tol):
-                refined = tightened(refined, inliers)
-                r = factors.whitened_norms(factors.residuals(refined.poses))
+            inliers, refined, _, _ = min(rounds[first:], key=lambda solved_round: solved_round[3])
+            refined = tightened(refined, inliers)
             poses = refined.poses
+            r = factors.whitened_norms(factors.residuals(poses))
             settled = True
             break
         inliers = decided

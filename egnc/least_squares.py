@@ -165,9 +165,8 @@ class SolverResult:
         linear: direct solves, CG solves and iterations, CG fallbacks (`egnc.step_solver`).
         step_damping: the LM damping `lambda` (relative to `H`'s diagonal) of the last accepted
             step; 0 for Gauss-Newton and when no step was accepted.
-        next_damping: the LM damping the solve would have tried next, the `initial_damping` that
-            continues it from `poses` (a large map's smoothest modes lose whole steps to a
-            restart at a larger one); 0 for Gauss-Newton.
+        next_damping: the LM damping the solve would try next: as `initial_damping`, a solve
+            from `poses` continues this one as if it had not stopped; 0 for Gauss-Newton.
         errors: the residuals at `poses` with what a linearization there reuses
             (`BetweenFactors.evaluate`), when the solve was asked to keep them (`keep_errors`),
             else None.
