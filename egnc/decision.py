@@ -569,9 +569,11 @@ def decide_outliers(
             return refined
         offset = refined.iterations
         progress = None if on_iteration is None else lambda k, cost: on_iteration(offset + k, cost)
-        options = solver_options
-        if refined.next_damping > 0:  # LM goes on from the damping it had reached
-            options = replace(solver_options, initial_damping=refined.next_damping)
+        # The round's iteration limit holds for both solves together; LM goes on from the
+        # damping it had reached.
+        options = replace(solver_options, max_iterations=solver_options.max_iterations - refined.iterations)
+        if refined.next_damping > 0:
+            options = replace(options, initial_damping=refined.next_damping)
         continued = round_problem(accepted).solve(refined.poses, accepted, options, progress)
         return _continued(refined, continued)
 

@@ -311,6 +311,20 @@ def test_rounds_stop_early_until_their_classification_holds(monkeypatch):
     np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
 
 
+def test_a_rounds_iteration_limit_counts_its_continuation_too():
+    graph = grid_world(2, 2000, seed=2).graph
+    clean = solve(graph, "l2")
+    corrupted = add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
+    unlimited = solve(corrupted.graph, gnc_options=GUESS_ONLY)
+    last = [stage for stage in unlimited.stages if stage.kind == "decision"][-1]
+    assert last.iterations >= 3  # a loose solve and its continuation
+    limit = SolverOptions(max_iterations=last.iterations - 1)
+    limited = solve(corrupted.graph, options=limit, gnc_options=GUESS_ONLY)
+    rounds = [stage for stage in limited.stages if stage.kind == "decision"]
+    assert max(stage.iterations for stage in rounds) <= limit.max_iterations
+    assert rounds[-1].status == 0 and not limited.converged  # the limit is reported, as for any stage
+
+
 def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch):
     # Force a cycle: every rejected loop is re-admitted, and the false ones fail again on the
     # next map. The rounds stop at the repeat and keep the classification of lowest truncated
