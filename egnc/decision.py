@@ -542,7 +542,7 @@ def decide_outliers(
     strict = replace(gnc_options, outlier_quantile=readmit_at)
     ever_readmitted = np.zeros(graph.num_edges, dtype=bool)
     solved: dict[bytes, int] = {}  # classification -> its round in `rounds`
-    rounds: list[tuple[np.ndarray, SolverResult, np.ndarray, float]] = []  # inliers, solve, r, truncated cost
+    rounds: list[tuple[np.ndarray, SolverResult, float]] = []  # inliers, solve, truncated cost
     # The rounds' problem (module docstring, "One analysis"): on a large system, the accepted
     # edges and every rejected loop that re-admission could take back at these poses.
     shared = d * graph.num_poses >= SHARED_ANALYSIS_MIN_UNKNOWNS
@@ -609,7 +609,7 @@ def decide_outliers(
             decided = classified(r, back)
         poses = refined.poses
         solved[np.packbits(inliers).tobytes()] = len(rounds)
-        rounds.append((inliers, refined, r, truncated_cost(r, robust, d, gnc_options.outlier_quantile)))
+        rounds.append((inliers, refined, truncated_cost(r, robust, d, gnc_options.outlier_quantile)))
         reports.append(least_squares_report(refined, started, int(inliers.sum()), "decision", start))
         if on_stage is not None:
             on_stage(reports[-1])
@@ -618,7 +618,7 @@ def decide_outliers(
             break
         first = solved.get(np.packbits(decided).tobytes())
         if first is not None:  # a cycle: keep its classification of lowest truncated cost
-            inliers, refined, _, _ = min(rounds[first:], key=lambda solved_round: solved_round[3])
+            inliers, refined, _ = min(rounds[first:], key=lambda solved_round: solved_round[2])
             refined = tightened(refined, inliers)
             poses = refined.poses
             r = factors.whitened_norms(factors.residuals(poses))
