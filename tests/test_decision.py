@@ -271,13 +271,20 @@ def test_vertices_without_edges_do_not_switch_the_decision_off(tmp_path):
     np.testing.assert_array_equal(~result.inliers, is_outlier)
 
 
-def test_decision_rounds_reach_a_fixed_point_where_they_used_to_alternate():
+@pytest.fixture(scope="module")
+def alternating_grid():
+    """A 2000-pose grid with 10 % false loops whose rounds from the guess used to alternate
+    (`CorruptedGraph`): the tests of the rounds' stopping share it."""
+    graph = grid_world(2, 2000, seed=2).graph
+    clean = solve(graph, "l2")
+    return add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
+
+
+def test_decision_rounds_reach_a_fixed_point_where_they_used_to_alternate(alternating_grid):
     # A 2000-pose grid whose rounds from the guess alternated between two classifications until
     # the round limit: true loops rejected at chi2.ppf(0.99) on one map came back through the
     # innovation test on the next. Held to the readmission quantile, they stay.
-    graph = grid_world(2, 2000, seed=2).graph
-    clean = solve(graph, "l2")
-    corrupted = add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
+    corrupted = alternating_grid
     result = solve(corrupted.graph, gnc_options=GUESS_ONLY)
     rounds = [stage for stage in result.stages if stage.kind == "decision"]
     assert len(rounds) < MAX_ROUNDS
@@ -285,13 +292,11 @@ def test_decision_rounds_reach_a_fixed_point_where_they_used_to_alternate():
     np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
 
 
-def test_rounds_stop_early_until_their_classification_holds(monkeypatch):
+def test_rounds_stop_early_until_their_classification_holds(monkeypatch, alternating_grid):
     # Every round's least squares stops at ROUND_TOLERANCE; the one whose classification holds
     # goes on to the caller's tolerance, so the decision's map is the least-squares optimum of
     # the accepted edges.
-    graph = grid_world(2, 2000, seed=2).graph
-    clean = solve(graph, "l2")
-    corrupted = add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
+    corrupted = alternating_grid
     tolerances = []
     solve_round = RoundProblem.solve
 
@@ -311,10 +316,8 @@ def test_rounds_stop_early_until_their_classification_holds(monkeypatch):
     np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
 
 
-def test_a_rounds_iteration_limit_counts_its_continuation_too():
-    graph = grid_world(2, 2000, seed=2).graph
-    clean = solve(graph, "l2")
-    corrupted = add_false_loops(graph, 10, seed=2, reference_poses=clean.graph.poses)
+def test_a_rounds_iteration_limit_counts_its_continuation_too(alternating_grid):
+    corrupted = alternating_grid
     unlimited = solve(corrupted.graph, gnc_options=GUESS_ONLY)
     last = [stage for stage in unlimited.stages if stage.kind == "decision"][-1]
     assert last.iterations >= 3  # a loose solve and its continuation
