@@ -45,7 +45,7 @@ from egnc.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.graph import PoseGraph
 from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, resolve_name
 from egnc.normal_equations import NormalEquationsPattern, edge_products
-from egnc.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, analysed_pattern, dot
+from egnc.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, WholeSystem, dot
 
 STATUS_MESSAGES = {
     0: "maximum number of iterations reached",
@@ -202,16 +202,25 @@ class Problem:
     Attributes:
         factors: the factors of every edge.
         fixed: `(N,)` bool, the poses without unknowns (pose 0 when the graph fixed none).
-        pattern: the normal-equations pattern of the free poses.
-        linear_solver: the direct solver analysed for `pattern`.
-        step_solver: the step solver over `pattern` (`egnc.step_solver`).
+        system: the normal equations of every edge (`egnc.step_solver.WholeSystem`): the layout
+            of the unknowns, and the pattern and direct solver, built at first use.
+        step_solver: the step solver over `system` (`egnc.step_solver`).
     """
 
     factors: BetweenFactors
     fixed: np.ndarray
-    pattern: NormalEquationsPattern
-    linear_solver: LinearSolver
+    system: WholeSystem
     step_solver: StepSolver
+
+    @property
+    def pattern(self) -> NormalEquationsPattern:
+        """The normal-equations pattern of the free poses (built at the first call)."""
+        return self.system.pattern
+
+    @property
+    def linear_solver(self) -> LinearSolver:
+        """The direct solver of `pattern`."""
+        return self.system.solver
 
     @classmethod
     def from_graph(
@@ -243,9 +252,8 @@ class Problem:
             fixed[0] = True
         d = factors.information.shape[-1]
         # Unknown blocks in a fill-reducing order of the free poses, computed once.
-        pattern, solver = analysed_pattern(factors.edges, fixed, d, backend, fill_reducing)
-        steps = StepSolver(factors.edges, fixed, d, backend, pattern, solver)
-        return cls(factors, fixed, pattern, solver, steps)
+        system = WholeSystem(factors.edges, fixed, d, backend, fill_reducing)
+        return cls(factors, fixed, system, StepSolver(factors.edges, fixed, d, backend, system))
 
     @property
     def num_poses(self) -> int:
@@ -260,7 +268,7 @@ class Problem:
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
         group = group_of(self.factors.dim)
-        free_index = self.pattern.free_index
+        free_index = self.system.free_index
         free = free_index >= 0
         moved = T.copy()
         moved[free] = group.rplus(T[free], step.reshape(-1, self.tangent_dim)[free_index[free]])
@@ -318,7 +326,7 @@ def solve_least_squares(
     loss = loss or QuadraticLoss()
     started = time.perf_counter()
     clock = _Clock()
-    factors, pattern = problem.factors, problem.pattern
+    factors = problem.factors
     T = np.array(initial_poses, dtype=np.float64)
 
     def evaluate(poses: np.ndarray, known: EdgeErrors | None = None) -> tuple[EdgeErrors, np.ndarray, float]:
@@ -335,24 +343,27 @@ def solve_least_squares(
     iterations = linear_solves = 0
     step_damping = 0.0
     status = 0 if np.isfinite(cost) else NUMERICAL_FAILURE
-    data = gradient = None  # normal equations at T, built when a step from T is needed
+    gradient = diagonal = None  # normal equations at T, built when a step from T is needed
     while status != NUMERICAL_FAILURE and iterations < options.max_iterations:
-        if data is None or gradient is None:  # always set and cleared together
+        if gradient is None or diagonal is None:  # always set and cleared together
             steps.discard_factorization()
             with clock("linearize"):
                 linearization = factors.linearize(T, errors)  # reuses the residuals at T
             with clock("assemble"):
                 weights = loss.weight(r)
                 products = edge_products(linearization, factors.information, weights)
-                data, gradient = pattern.scatter(products)
-                steps.set_system(data, products, weights, options.linear_method, options.trust_weight, trusted)
+                gradient, diagonal = steps.set_system(
+                    products, weights, options.linear_method, options.trust_weight, trusted
+                )
                 # Freed before the next linearization builds its own (each about 100 MB on a
                 # 50 000-pose 3D grid, where they set the robust solve's peak memory).
                 del linearization, products
-            diagonal = np.clip(data[pattern.diagonal_slots], 1e-6, 1e32)
-        if not np.all(np.isfinite(data)) or not np.all(np.isfinite(gradient)):
-            status = NUMERICAL_FAILURE
-            break
+            # With the information matrices checked at input, a non-finite Jacobian, residual or
+            # weight shows in g or on H's diagonal (a column's weighted square).
+            if not np.all(np.isfinite(diagonal)) or not np.all(np.isfinite(gradient)):
+                status = NUMERICAL_FAILURE
+                break
+            diagonal = np.clip(diagonal, 1e-6, 1e32)
         if np.max(np.abs(gradient), initial=0.0) <= options.gradient_tol:
             status = 2
             break
@@ -398,7 +409,7 @@ def solve_least_squares(
             growth = 2.0
         previous = cost
         T, errors, r, cost = T_new, errors_new, r_new, cost_new
-        data = gradient = None
+        gradient = diagonal = None
         history.append(cost)
         iterations += 1
         if on_iteration is not None:

@@ -77,13 +77,8 @@ class NormalEquationsPattern:
             block_order: `(num_free,)` permutation; unknown block `k` belongs to the
                 `block_order[k]`-th free pose (in pose-row order). Default: pose-row order.
         """
-        free_rows = np.flatnonzero(~fixed)
-        num_free = len(free_rows)
-        free_index = np.full(len(fixed), -1, dtype=np.int64)
-        order = np.arange(num_free) if block_order is None else np.asarray(block_order, dtype=np.int64)
-        if order.shape != (num_free,) or not np.array_equal(np.sort(order), np.arange(num_free)):
-            raise ValueError(f"block_order must be a permutation of range({num_free})")
-        free_index[free_rows[order]] = np.arange(num_free)
+        free_index = block_indices(fixed, block_order)
+        num_free = int(np.count_nonzero(~fixed))
         size = num_free * d
 
         # Stored blocks of H: every diagonal block, and both off-diagonal blocks of every pair of
@@ -169,6 +164,24 @@ class NormalEquationsPattern:
         """Sum per-edge products `P` `(E, 2d, 2d + 1)` (`edge_products`) into `H`'s data `(nnz,)` and `g` `(n,)`."""
         out = np.bincount(self.slots.ravel(), weights=products.ravel(), minlength=self.nnz + self.size + 1)
         return out[: self.nnz], out[self.nnz : self.nnz + self.size]
+
+
+def block_indices(fixed: np.ndarray, block_order: np.ndarray | None = None) -> np.ndarray:
+    """`(N,)` unknown-block index of each pose, -1 for a fixed pose (`NormalEquationsPattern.free_index`).
+
+    Args:
+        fixed: `(N,)` bool, poses without unknowns.
+        block_order: `(num_free,)` permutation; block `k` belongs to the `block_order[k]`-th free
+            pose (in pose-row order). Default: pose-row order.
+    """
+    free_rows = np.flatnonzero(~fixed)
+    num_free = len(free_rows)
+    order = np.arange(num_free) if block_order is None else np.asarray(block_order, dtype=np.int64)
+    if order.shape != (num_free,) or not np.array_equal(np.sort(order), np.arange(num_free)):
+        raise ValueError(f"block_order must be a permutation of range({num_free})")
+    free_index = np.full(len(fixed), -1, dtype=np.int64)
+    free_index[free_rows[order]] = np.arange(num_free)
+    return free_index
 
 
 def edge_products(linearization: Linearization, information: np.ndarray, weights: np.ndarray) -> np.ndarray:

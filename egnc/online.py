@@ -43,9 +43,9 @@ one either way, a new one outwards), the update is redone on the whole map from 
 the region's boundary would still move (its poses' own Newton steps would lower the cost by more
 than `OnlineOptions.boundary_share` of the update's tolerance), the last stage goes on over the
 whole map.
-A whole-map solve builds the grown system's normal-equations pattern in pose-row order (CG
-solves it; no fill-reducing order is computed) and analyses the preconditioner of the edges the
-map trusts (ordering and symbolic factorization, `egnc.step_solver`).
+A whole-map solve analyses the preconditioner of the edges the map trusts (ordering and symbolic
+factorization, `egnc.step_solver`); CG's operator is that system plus the other loops' own
+terms, so no pattern of the whole grown system is built unless a step falls back to it.
 With `OnlineOptions(decide_at_arrival=True)` (`egnc` schedule) an update may solve nothing: its
 first stage (one Gauss-Newton step with the new loops at `mu = 0`) is predicted from a
 factorization of the map kept from the last whole-map solve (`egnc.arrival`), and when that

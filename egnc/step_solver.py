@@ -12,7 +12,10 @@
   trusted graph (a false loop joins distant poses, and its fill-in is what made a robust
   iteration cost 20-100 clean ones), while `P^-1 (H + diag(s)) = I + P^-1 H_U` differs from
   the identity only by the untrusted edges' small, low-rank terms, so CG converges in a few
-  iterations (2 to 60 on the benchmark files).
+  iterations (2 to 60 on the benchmark files). CG multiplies by `H_T + H_U` as `H_T`'s stored
+  matrix (the one the preconditioner factorizes, undamped) plus each untrusted edge's own
+  product: the pattern of all of `H`, whose blocks hold every false loop, is built
+  (`WholeSystem`) only for a step solved directly.
 
 `"auto"` uses the direct path when every edge is trusted (plain least squares, the first stage
 of a graduation, a refinement on accepted edges) and CG otherwise. CG stops at a relative
@@ -54,7 +57,7 @@ from egnc.linear_solvers import (
     make_linear_solver,
     orders_by_factorizing,
 )
-from egnc.normal_equations import NormalEquationsPattern
+from egnc.normal_equations import NormalEquationsPattern, block_indices
 
 LinearMethod = Literal["auto", "direct"]
 LINEAR_METHODS = ("auto", "direct")
@@ -88,8 +91,24 @@ class _TrustedSystem:
     unknowns: np.ndarray
 
 
+def _block_layout(
+    edges: np.ndarray, fixed: np.ndarray, backend: Backend, fill_reducing: bool
+) -> tuple[np.ndarray | None, tuple[int, np.ndarray] | None]:
+    """`(block order, in-block order)` of the normal equations of `edges` `(E, 2)`: the
+    fill-reducing block order to build the pattern in, or `(num_blocks, (K, 2) block pairs)` for a
+    backend that orders by factorizing (`_InBlockOrder`), or neither (`fill_reducing` False: the
+    pattern in pose-row order, which the solver orders itself if it is ever used)."""
+    if not fill_reducing:
+        return None, None
+    free_block = np.cumsum(~fixed) - 1
+    blocks = (int(np.count_nonzero(~fixed)), free_block[edges[~fixed[edges].any(axis=1)]])
+    if orders_by_factorizing(backend):
+        return None, blocks
+    return block_order(backend, *blocks), None
+
+
 def analysed_pattern(
-    edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend, fill_reducing: bool = True
+    edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
     """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`_OnFirstUse`).
 
@@ -98,24 +117,77 @@ def analysed_pattern(
         fixed: `(N,)` bool, poses without unknowns.
         d: tangent dimension.
         backend: resolved linear-solver backend.
-        fill_reducing: False: the pattern in pose-row order, which the solver orders itself if it
-            is ever used (for a system that CG solves and only a fallback factorizes).
 
     A backend whose block order costs a factorization (`orders_by_factorizing`) gets the pattern
     in pose-row order and computes the block order at its first factorization
     (`_InBlockOrder`): a robust problem's whole system, false loops included, is often never
     factorized (its steps go through the trusted preconditioner).
     """
-    order = in_block_order = None
-    if fill_reducing:
-        free_block = np.cumsum(~fixed) - 1
-        blocks = (int(np.count_nonzero(~fixed)), free_block[edges[~fixed[edges].any(axis=1)]])
-        if orders_by_factorizing(backend):
-            in_block_order = blocks
-        else:
-            order = block_order(backend, *blocks)
+    return _built(edges, fixed, d, backend, True, *_block_layout(edges, fixed, backend, True))
+
+
+def _built(
+    edges: np.ndarray,
+    fixed: np.ndarray,
+    d: int,
+    backend: Backend,
+    fill_reducing: bool,
+    order: np.ndarray | None,
+    in_block_order: tuple[int, np.ndarray] | None,
+) -> tuple[NormalEquationsPattern, LinearSolver]:
+    """The pattern of `edges` in the layout `_block_layout` chose, and its solver."""
     pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=lower_triangle_only(backend), block_order=order)
     return pattern, _OnFirstUse(backend, pattern, ordered=fill_reducing, in_block_order=in_block_order)
+
+
+class WholeSystem:
+    """The normal equations of all of a problem's edges: their unknowns' layout, and their pattern
+    and direct solver, built when first asked for.
+
+    A robust problem's steps mostly go through CG with the trusted preconditioner, whose operator
+    is the trusted system plus the other edges' own products (`StepSolver`): it needs neither the
+    whole pattern (and its scatter map, `(E, 2d, 2d + 1)` slots) nor its solver. They are built for
+    a direct step, a CG fallback, or a caller that reads them (e.g. `egnc.marginals`).
+
+    Attributes:
+        free_index: `(N,)` unknown-block index of each pose, -1 for a fixed pose, as in `pattern`.
+        size: number of unknowns `n`.
+    """
+
+    def __init__(self, edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend, fill_reducing: bool = True):
+        """Args:
+        edges: `(E, 2)` pose rows of the edges.
+        fixed: `(N,)` bool, poses without unknowns.
+        d: tangent dimension.
+        backend: resolved linear-solver backend.
+        fill_reducing: False: pose-row order, which the solver orders itself if it is ever used
+            (for a system that CG solves and only a fallback factorizes).
+
+        The block order is computed here (as `analysed_pattern` does), the pattern at first use.
+        """
+        self._edges, self._fixed, self._d, self._backend = edges, fixed, d, backend
+        self._fill_reducing = fill_reducing
+        self._order, self._in_block_order = _block_layout(edges, fixed, backend, fill_reducing)
+        self.free_index = block_indices(fixed, self._order)
+        self.size = d * int(np.count_nonzero(~fixed))
+        self._built: tuple[NormalEquationsPattern, LinearSolver] | None = None
+
+    @property
+    def pattern(self) -> NormalEquationsPattern:
+        """The normal-equations pattern of every edge (built at the first call)."""
+        return self._pattern_and_solver()[0]
+
+    @property
+    def solver(self) -> LinearSolver:
+        """The direct solver of `pattern` (analysed at its first factorization, `_OnFirstUse`)."""
+        return self._pattern_and_solver()[1]
+
+    def _pattern_and_solver(self) -> tuple[NormalEquationsPattern, LinearSolver]:
+        if self._built is None:
+            self._built = _built(
+                self._edges, self._fixed, self._d, self._backend, self._fill_reducing, self._order, self._in_block_order
+            )
+        return self._built
 
 
 class _OnFirstUse:
@@ -257,25 +329,25 @@ class StepSolver:
         fixed: np.ndarray,
         d: int,
         backend: Backend,
-        pattern: NormalEquationsPattern,
-        direct_solver: LinearSolver,
+        system: WholeSystem,
     ):
         """Args:
         edges: `(E, 2)` pose rows of every edge.
-        fixed: `(N,)` bool, poses without unknowns (as in `pattern`).
+        fixed: `(N,)` bool, poses without unknowns (as in `system`).
         d: tangent dimension.
         backend: resolved linear-solver backend.
-        pattern: the full normal-equations pattern.
-        direct_solver: the solver analysed for `pattern`.
+        system: the normal equations of every edge (their pattern built at the first direct step).
         """
         self._edges, self._fixed, self._d, self._backend = edges, fixed, d, backend
-        self.pattern, self.direct_solver = pattern, direct_solver
+        self.system = system
+        self._edge_unknowns: np.ndarray | None = None
         self._components = 0  # of the whole graph, counted when a trusted set first needs it
         self._trusted_systems: OrderedDict[bytes, _TrustedSystem] = OrderedDict()
         self._given_systems: OrderedDict[bytes, _TrustedSystem | None] = OrderedDict()  # exact sets, kept
         self.analyses = 0  # trusted patterns analysed
         self.statistics = LinearStatistics()
-        self._data = np.empty(0)
+        self._data: np.ndarray | None = None  # H's CSC data in the whole pattern, for direct steps
+        self._products: np.ndarray | None = None  # the per-edge products, for CG's operator
         self._trusted: _TrustedSystem | None = None
         self._trusted_data = np.empty(0)
         self._last_direct: Factorization | None = None
@@ -288,20 +360,32 @@ class StepSolver:
         self.statistics = LinearStatistics()
         self._trusted_systems.clear()
 
+    @property
+    def pattern(self) -> NormalEquationsPattern:
+        """The whole normal-equations pattern (`WholeSystem.pattern`, built at the first call)."""
+        return self.system.pattern
+
+    @property
+    def direct_solver(self) -> LinearSolver:
+        """The solver of the whole pattern (`WholeSystem.solver`)."""
+        return self.system.solver
+
     def set_system(
         self,
-        data: np.ndarray,
         products: np.ndarray,
         weights: np.ndarray,
         method: LinearMethod = "auto",
         trust_weight: float = 1e-4,
         trusted: np.ndarray | None = None,
-    ) -> None:
-        """Take the undamped `H` of one linearization.
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Take the undamped `H` of one linearization, as its per-edge products.
+
+        A direct step sums them into the whole pattern; CG's operator uses the trusted system
+        (summed into its own pattern for the preconditioner) and the other edges' products.
 
         Args:
-            data: `(nnz,)` CSC data of `H` in `pattern`.
-            products: `(E, 2d, 2d + 1)` per-edge products `H` was summed from (`edge_products`).
+            products: `(E, 2d, 2d + 1)` per-edge products `[J_i | J_j]^T w Omega [J_i | J_j | e]`
+                (`edge_products`); held until the next linearization (`discard_factorization`).
             weights: `(E,)` IRLS weights.
             method: `"auto"` (CG preconditioned by the trusted edges when some edge is not
                 trusted) or `"direct"`.
@@ -309,8 +393,12 @@ class StepSolver:
             trusted: `(E,)` bool, the preconditioner's edges exactly, instead of those chosen by
                 `trust_weight`: a caller that keeps one set over many linearizations and solves
                 pays one analysis for it (its analysis outlives `start_solve`).
+
+        Returns:
+            The gradient `g = sum J^T w Omega e` `(n,)` and the diagonal of `H` `(n,)`, summed
+            in the same order as `NormalEquationsPattern.scatter` sums them (the same bits).
         """
-        self._data = data
+        self._data = self._products = None
         self._trusted = None
         if method == "auto" and trusted is not None:
             self._trusted = None if trusted.all() else self._given_system(trusted)
@@ -318,8 +406,27 @@ class StepSolver:
             by_weight = weights >= trust_weight
             if not by_weight.all():
                 self._trusted = self._trusted_system(by_weight)
-        if self._trusted is not None:
-            self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
+        if self._trusted is None:
+            pattern = self.pattern
+            self._data, gradient = pattern.scatter(products)
+            return gradient, self._data[pattern.diagonal_slots]
+        self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
+        self._products = products
+        d2 = products.shape[1]
+        rows = self._unknowns_of_edges().ravel()
+        n = self.system.size
+        gradient = np.bincount(rows, products[:, :, d2].ravel(), minlength=n + 1)[:n]
+        diagonal = np.bincount(rows, products[:, np.arange(d2), np.arange(d2)].ravel(), minlength=n + 1)[:n]
+        return gradient, diagonal
+
+    def _unknowns_of_edges(self) -> np.ndarray:
+        """`(E, 2d)` the unknown of each row of an edge's product; `n` (discarded) for a fixed pose."""
+        if self._edge_unknowns is None:
+            d, blocks = self._d, self.system.free_index[self._edges]  # (E, 2)
+            side = np.arange(2 * d) // d
+            unknowns = blocks[:, side] * d + np.arange(2 * d) % d
+            self._edge_unknowns = np.where(blocks[:, side] >= 0, unknowns, self.system.size)
+        return self._edge_unknowns
 
     def solve(
         self, shift: np.ndarray, rhs: np.ndarray, cg_tol: float = 1e-10, max_cg_iterations: int = 200
@@ -338,7 +445,10 @@ class StepSolver:
                 return step
             self.statistics.cg_fallbacks += 1
             self._trusted = None  # the rest of this linearization's solves go direct
+            assert self._products is not None, "a CG step keeps its linearization's products"
+            self._data, self._products = self.pattern.scatter(self._products)[0], None
         self.statistics.direct_solves += 1
+        assert self._data is not None, "set_system comes first"
         damped = self._data.copy()
         damped[self.pattern.diagonal_slots] += shift
         self._last_direct = None  # never two factorizations held at once (SuperLU's are new objects)
@@ -353,9 +463,11 @@ class StepSolver:
         return self._last_direct
 
     def discard_factorization(self) -> None:
-        """Let the last direct factorization go, before the arrays of a new linearization are built
-        (a SuperLU factorization is a new object each time; held on, it would add to the peak)."""
+        """Let the last direct factorization and the linearization's `H` go, before the arrays of
+        a new linearization are built (a SuperLU factorization is a new object each time; held
+        on, either would add to the peak)."""
         self._last_direct = None
+        self._data = self._products = None
 
     def trusted_factorization(self, products: np.ndarray, trusted: np.ndarray) -> Factorization | None:
         """The factorization of `H_T`, the sum of exactly the `trusted` `(E,)` edges' `products`
@@ -391,7 +503,7 @@ class StepSolver:
             out[trusted.unknowns] = trusted_solve(v[trusted.unknowns])
             return out
 
-        multiply = self._operator(shift)
+        multiply = self._operator(trusted, shift)
         x = np.zeros_like(rhs)
         residual = rhs.copy()
         goal = tol * np.sqrt(dot(rhs, rhs))
@@ -415,17 +527,33 @@ class StepSolver:
         converged = np.sqrt(dot(residual, residual)) <= goal
         return x if converged and np.all(np.isfinite(x)) else None
 
-    def _operator(self, shift: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """`v -> (H + diag(shift)) v` from `H`'s stored CSC data (lower triangle or whole)."""
-        pattern = self.pattern
-        matrix = sp.csc_matrix((self._data, pattern.indices, pattern.indptr), shape=(pattern.size, pattern.size))
+    def _operator(self, trusted: _TrustedSystem, shift: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """`v -> (H + diag(shift)) v` as `H_T v + H_U v`: the trusted system's stored CSC data
+        (lower triangle or whole) and the other edges' products (`set_system`)."""
+        pattern = trusted.pattern
+        data = self._trusted_data
+        matrix = sp.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.size, pattern.size))
         transposed = matrix.T
-        diagonal = self._data[pattern.diagonal_slots]
+        diagonal = data[pattern.diagonal_slots]
+        assert self._products is not None, "set_system comes first"
+        others = np.flatnonzero(~trusted.edges)
+        d2 = self._products.shape[1]
+        other_products = self._products[others, :, :d2]  # (K, 2d, 2d)
+        rows = self._unknowns_of_edges()[others]  # (K, 2d)
+        n = self.system.size
+        unknowns = trusted.unknowns
 
         def multiply(v: np.ndarray) -> np.ndarray:
-            out = matrix @ v + shift * v
+            ordered = v[unknowns]
+            product = matrix @ ordered
             if pattern.lower_only:
-                out += transposed @ v - diagonal * v
+                product += transposed @ ordered - diagonal * ordered
+            out = shift * v
+            out[unknowns] += product
+            if len(others):
+                ends = np.append(v, 0.0)[rows]  # (K, 2d); a fixed pose's rows read 0
+                terms = np.einsum("kij,kj->ki", other_products, ends)
+                out += np.bincount(rows.ravel(), terms.ravel(), minlength=n + 1)[:n]
             return out
 
         return multiply
@@ -472,6 +600,6 @@ class StepSolver:
         component = np.arange(self._d)
         unknowns = np.empty(pattern.size, dtype=np.int64)
         unknowns[(pattern.free_index[free][:, None] * self._d + component).ravel()] = (
-            self.pattern.free_index[free][:, None] * self._d + component
+            self.system.free_index[free][:, None] * self._d + component
         ).ravel()
         return _TrustedSystem(selected.copy(), pattern, solver, unknowns)

@@ -45,7 +45,7 @@ def damped_system_and_direct_step(graph, backend: str):
     data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
     steps = problem.step_solver
     shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
-    steps.set_system(data, products, weights, "direct")
+    steps.set_system(products, weights, "direct")
     return steps, data, gradient, products, weights, shift, steps.solve(shift, gradient)
 
 
@@ -57,12 +57,49 @@ def test_preconditioned_step_equals_the_direct_step(corrupted, backend):
     assert (weights < 1e-4).sum() > 0.5 * corrupted.is_outlier.sum()  # most false loops are switched off
     shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
     steps = problem.step_solver
-    steps.set_system(data, products, weights, "direct")
+    steps.set_system(products, weights, "direct")
     direct = steps.solve(shift, gradient)
-    steps.set_system(data, products, weights, "auto", trust_weight=1e-4)
+    steps.set_system(products, weights, "auto", trust_weight=1e-4)
     preconditioned = steps.solve(shift, gradient)
     assert steps.statistics.cg_solves == 1 and steps.statistics.cg_fallbacks == 0
     assert 0 < steps.statistics.cg_iterations <= 50
+    np.testing.assert_allclose(preconditioned, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_preconditioned_step_builds_no_whole_pattern_and_sums_the_same_gradient(corrupted, backend, monkeypatch):
+    """CG's operator is the trusted system plus the other edges' products: the pattern of every
+    edge (false loops' fill-in included) is not built, and the gradient and diagonal of `H` that
+    `set_system` returns are the whole pattern's, bit for bit."""
+    import egnc.step_solver as step_solver
+
+    graph = corrupted.graph
+    built = []
+    build = step_solver.NormalEquationsPattern.build
+
+    def recorded_build(edges, *args, **kwargs):
+        built.append(len(edges))
+        return build(edges, *args, **kwargs)
+
+    monkeypatch.setattr(step_solver.NormalEquationsPattern, "build", recorded_build)
+    problem = Problem.from_graph(graph, backend)
+    poses = to_matrices(graph.dim, graph.poses)
+    linearization = problem.factors.linearize(poses)
+    r = problem.factors.whitened_norms(linearization.residuals)
+    weights = np.where(graph.is_loop_closure, make_kernel("gm", c=3.0).weight(r, np.ones_like(r)), 1.0)
+    products = edge_products(linearization, problem.factors.information, weights)
+    steps = problem.step_solver
+    gradient, diagonal = steps.set_system(products, weights, "auto", trust_weight=1e-4)
+    shift = 1e-6 * np.clip(diagonal, 1e-6, 1e32)
+    preconditioned = steps.solve(shift, gradient)
+    assert steps.statistics.cg_solves == 1 and steps.statistics.cg_fallbacks == 0
+    assert len(built) == 1 and built[0] < graph.num_edges  # the trusted edges' pattern only
+    data, whole_gradient = problem.pattern.scatter(products)
+    assert built[1:] == [graph.num_edges]  # built when read
+    np.testing.assert_array_equal(gradient, whole_gradient)
+    np.testing.assert_array_equal(diagonal, data[problem.pattern.diagonal_slots])
+    steps.set_system(products, weights, "direct")
+    direct = steps.solve(shift, gradient)
     np.testing.assert_allclose(preconditioned, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
 
 
@@ -73,9 +110,9 @@ def test_conjugate_gradients_that_stall_fall_back_to_the_direct_solve(corrupted,
     data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
     shift = np.full(problem.pattern.size, 1e-3)
     steps = problem.step_solver
-    steps.set_system(data, products, weights, "direct")
+    steps.set_system(products, weights, "direct")
     direct = steps.solve(shift, gradient)
-    steps.set_system(data, products, weights, "auto", trust_weight=0.5)
+    steps.set_system(products, weights, "auto", trust_weight=0.5)
     step = steps.solve(shift, gradient, max_cg_iterations=1)
     assert steps.statistics.cg_fallbacks == 1 and steps.statistics.direct_solves == 2
     np.testing.assert_allclose(step, direct, rtol=1e-10, atol=1e-12)
@@ -89,7 +126,7 @@ def test_trusted_edges_that_leave_a_pose_loose_are_not_a_preconditioner(corrupte
     weights[np.flatnonzero(graph.is_odometry)[5]] = 1e-9  # cuts the odometry chain where no trusted loop bridges
     weights[graph.is_loop_closure] = 1e-9
     steps = problem.step_solver
-    steps.set_system(data, products, weights, "auto", trust_weight=1e-4)
+    steps.set_system(products, weights, "auto", trust_weight=1e-4)
     steps.solve(np.full(problem.pattern.size, 1e-3), gradient)
     assert steps.statistics.cg_solves == 0 and steps.statistics.direct_solves == 1
 
@@ -126,7 +163,7 @@ def test_a_trusted_set_inside_an_analysed_one_reuses_it_and_no_other_does(corrup
     weights[untrusted_loops[0]] = 0.5 * trust  # just below the trust weight
 
     def step_with(moved: np.ndarray) -> None:
-        steps.set_system(data, products, moved, "auto", trust_weight=trust)
+        steps.set_system(products, moved, "auto", trust_weight=trust)
         np.testing.assert_allclose(steps.solve(shift, gradient), direct, rtol=0, atol=1e-8 * np.abs(direct).max())
 
     step_with(weights)
@@ -151,12 +188,12 @@ def test_a_given_trusted_set_is_analysed_once_across_solves(corrupted, backend):
     given[np.flatnonzero(graph.is_loop_closure)[:5]] = False
     for _ in range(2):  # two nonlinear solves: the given set's analysis outlives start_solve
         steps.start_solve()
-        steps.set_system(data, products, weights, "auto", trusted=given)
+        steps.set_system(products, weights, "auto", trusted=given)
         step = steps.solve(shift, gradient)
         np.testing.assert_allclose(step, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
         assert steps.statistics.cg_solves == 1 and steps.statistics.cg_fallbacks == 0
     assert steps.analyses == 1
-    steps.set_system(data, products, weights, "auto", trusted=np.ones(graph.num_edges, dtype=bool))
+    steps.set_system(products, weights, "auto", trusted=np.ones(graph.num_edges, dtype=bool))
     steps.solve(shift, gradient)
     assert steps.statistics.direct_solves == 1  # every edge given: the direct path
 
@@ -172,9 +209,9 @@ def test_a_system_left_in_pose_row_order_gives_the_same_steps(corrupted, backend
         data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
         shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
         steps = problem.step_solver
-        steps.set_system(data, products, weights, "auto", trusted=weights >= 1e-4)
+        steps.set_system(products, weights, "auto", trusted=weights >= 1e-4)
         preconditioned = steps.solve(shift, gradient)
-        steps.set_system(data, products, weights, "direct")
+        steps.set_system(products, weights, "direct")
         direct = steps.solve(shift, gradient)
         assert steps.statistics.cg_solves == 1 and steps.statistics.direct_solves == 1
         # Per pose, in pose-row order: unknown block free_index[p] belongs to pose p.
@@ -216,7 +253,7 @@ def test_scipy_orders_a_system_at_its_first_factorization_and_solves_it_as_if_bu
         data, gradient, products, weights = linearized_system(problem, graph, to_matrices(graph.dim, graph.poses))
         shift = 1e-6 * np.clip(data[problem.pattern.diagonal_slots], 1e-6, 1e32)
         steps = problem.step_solver
-        steps.set_system(data, products, weights, "direct")
+        steps.set_system(products, weights, "direct")
         direct_steps[deferred] = [steps.solve(shift, gradient).reshape(-1, graph.tangent_dim)[blocks]]
         assert len(orders) == 1
         # Many right-hand sides (as the marginal covariances solve), given in pose-row order.
