@@ -170,7 +170,7 @@ class WholeSystem:
         self._order, self._in_block_order = _block_layout(edges, fixed, backend, fill_reducing)
         self.free_index = block_indices(fixed, self._order)
         self.size = d * int(np.count_nonzero(~fixed))
-        self._built: tuple[NormalEquationsPattern, LinearSolver] | None = None
+        self._pattern_solver: tuple[NormalEquationsPattern, LinearSolver] | None = None
 
     @property
     def pattern(self) -> NormalEquationsPattern:
@@ -183,11 +183,11 @@ class WholeSystem:
         return self._pattern_and_solver()[1]
 
     def _pattern_and_solver(self) -> tuple[NormalEquationsPattern, LinearSolver]:
-        if self._built is None:
-            self._built = _built(
+        if self._pattern_solver is None:
+            self._pattern_solver = _built(
                 self._edges, self._fixed, self._d, self._backend, self._fill_reducing, self._order, self._in_block_order
             )
-        return self._built
+        return self._pattern_solver
 
 
 class _OnFirstUse:
