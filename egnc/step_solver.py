@@ -360,16 +360,6 @@ class StepSolver:
         self.statistics = LinearStatistics()
         self._trusted_systems.clear()
 
-    @property
-    def pattern(self) -> NormalEquationsPattern:
-        """The whole normal-equations pattern (`WholeSystem.pattern`, built at the first call)."""
-        return self.system.pattern
-
-    @property
-    def direct_solver(self) -> LinearSolver:
-        """The solver of the whole pattern (`WholeSystem.solver`)."""
-        return self.system.solver
-
     def set_system(
         self,
         products: np.ndarray,
@@ -407,7 +397,7 @@ class StepSolver:
             if not by_weight.all():
                 self._trusted = self._trusted_system(by_weight)
         if self._trusted is None:
-            pattern = self.pattern
+            pattern = self.system.pattern
             self._data, gradient = pattern.scatter(products)
             return gradient, self._data[pattern.diagonal_slots]
         self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
@@ -446,13 +436,13 @@ class StepSolver:
             self.statistics.cg_fallbacks += 1
             self._trusted = None  # the rest of this linearization's solves go direct
             assert self._products is not None, "a CG step keeps its linearization's products"
-            self._data, self._products = self.pattern.scatter(self._products)[0], None
+            self._data, self._products = self.system.pattern.scatter(self._products)[0], None
         self.statistics.direct_solves += 1
         assert self._data is not None, "set_system comes first"
         damped = self._data.copy()
-        damped[self.pattern.diagonal_slots] += shift
+        damped[self.system.pattern.diagonal_slots] += shift
         self._last_direct = None  # never two factorizations held at once (SuperLU's are new objects)
-        self._last_direct = self.direct_solver.factorize(damped)
+        self._last_direct = self.system.solver.factorize(damped)
         return self._last_direct(rhs)
 
     def last_direct_factorization(self) -> Factorization | None:
