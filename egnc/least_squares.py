@@ -356,7 +356,8 @@ def solve_least_squares(
                     products, weights, options.linear_method, options.trust_weight, trusted
                 )
                 # Freed before the next linearization builds its own (each about 100 MB on a
-                # 50 000-pose 3D grid, where they set the robust solve's peak memory).
+                # 50 000-pose 3D grid, where they set the robust solve's peak memory); a CG step's
+                # products stay with the step solver until `discard_factorization` above.
                 del linearization, products
             # With the information matrices checked at input, a non-finite Jacobian, residual or
             # weight shows in g or on H's diagonal (a column's weighted square).
