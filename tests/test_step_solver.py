@@ -29,12 +29,17 @@ def corrupted(request):
     return add_false_loops(world.graph, 30, seed=6, reference_poses=clean.graph.poses)
 
 
-def linearized_system(problem: Problem, graph, poses):
-    """`H` data, gradient, per-edge products and Geman-McClure weights at `poses`."""
+def products_and_weights(problem: Problem, graph, poses):
+    """Per-edge products and Geman-McClure weights at `poses`."""
     linearization = problem.factors.linearize(poses)
     r = problem.factors.whitened_norms(linearization.residuals)
     weights = np.where(graph.is_loop_closure, make_kernel("gm", c=3.0).weight(r, np.ones_like(r)), 1.0)
-    products = edge_products(linearization, problem.factors.information, weights)
+    return edge_products(linearization, problem.factors.information, weights), weights
+
+
+def linearized_system(problem: Problem, graph, poses):
+    """`H` data, gradient, per-edge products and Geman-McClure weights at `poses`."""
+    products, weights = products_and_weights(problem, graph, poses)
     data, gradient = problem.pattern.scatter(products)
     return data, gradient, products, weights
 
@@ -83,11 +88,7 @@ def test_a_preconditioned_step_builds_no_whole_pattern_and_sums_the_same_gradien
 
     monkeypatch.setattr(step_solver.NormalEquationsPattern, "build", recorded_build)
     problem = Problem.from_graph(graph, backend)
-    poses = to_matrices(graph.dim, graph.poses)
-    linearization = problem.factors.linearize(poses)
-    r = problem.factors.whitened_norms(linearization.residuals)
-    weights = np.where(graph.is_loop_closure, make_kernel("gm", c=3.0).weight(r, np.ones_like(r)), 1.0)
-    products = edge_products(linearization, problem.factors.information, weights)
+    products, weights = products_and_weights(problem, graph, to_matrices(graph.dim, graph.poses))
     steps = problem.step_solver
     gradient, diagonal = steps.set_system(products, weights, "auto", trust_weight=1e-4)
     shift = 1e-6 * np.clip(diagonal, 1e-6, 1e32)
