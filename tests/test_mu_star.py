@@ -11,7 +11,7 @@ from scipy.optimize import brentq
 
 from egnc.errors import EgncError
 from egnc.kernels import make_kernel
-from egnc.mu_star import convexity_margin, mu_star
+from egnc.mu_star import _margin_and_slope, convexity_margin, mu_star
 
 
 def design_f(mu, r, c):
@@ -94,6 +94,16 @@ def test_margin_is_f_over_d_squared():
     expected = design_f(mu, r, c) / (c * c + r ** (2 * mu)) ** 2
     got = convexity_margin(mu, 2 * np.log(r), 2 * math.log(c))
     np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
+
+
+def test_slope_matches_finite_differences():
+    """The Newton solve's dG/dmu against central differences of G, across the bracket and r."""
+    r = np.logspace(0, 3, 40)[:, None]
+    mu = np.linspace(0.5, 1.0, 11)[None, :]
+    log_r2, log_c2, h = 2 * np.log(r), 2 * math.log(3.0), 1e-6
+    _, slope = _margin_and_slope(mu, log_r2, log_c2)
+    central = (convexity_margin(mu + h, log_r2, log_c2) - convexity_margin(mu - h, log_r2, log_c2)) / (2 * h)
+    np.testing.assert_allclose(slope, central, rtol=1e-6, atol=1e-9)
 
 
 def test_shapes_and_extremes():
