@@ -434,16 +434,18 @@ class OnlineSolver:
             raise GraphError("information matrices must be symmetric")
         if k and np.any(np.linalg.eigvalsh(0.5 * (info + info.swapaxes(1, 2)))[:, 0] <= 0.0):
             raise GraphError("information matrices must be positive definite")
-        known = set(self._known_ids)
+        reached: set[int] = set()  # poses this batch's odometry places; the solver's ids are not copied
         for i, j in pairs.tolist():
             if i == j:
                 raise GraphError(f"an edge joins pose {i} to itself")
-            if robust and not (i in known and j in known):
-                missing = i if i not in known else j
+            known_i = i in self._known_ids or i in reached
+            known_j = j in self._known_ids or j in reached
+            if robust and not (known_i and known_j):
+                missing = j if known_i else i
                 raise GraphError(f"loop closure ({i}, {j}): pose {missing} is not known; add it or its odometry first")
-            if not robust and i not in known and j not in known:
+            if not robust and not known_i and not known_j:
                 raise GraphError(f"odometry ({i}, {j}) joins two unknown poses: one end must be known")
-            known.update((i, j))
+            reached.update((i, j))
         first = len(self._edges) + len(self._pending.edge_ids)
         for (i, j), value, matrix in zip(pairs.tolist(), values, info):
             for vertex_id in (i, j):
