@@ -28,8 +28,7 @@ large-r asymptote `mu* ~ 1/2 + c^4 / r^2` (capped below 1), kept in the bracket 
 that would leave it (or is not a number) is a bisection instead. They stop when every step is
 below 1e-14. Newton converges quadratically near the root, so that takes four to eight steps
 for residuals up to `30 c^2` (where the asymptote is still far off) and one or two beyond, each
-a handful of array operations: an online update that graduates a few loops pays tens of
-microseconds, not the hundreds that 46 bisection halvings cost.
+a handful of array operations.
 
 References:
     - M. McGann, F. Dellaert, M. Kaess, "Robust Incremental Smoothing and Mapping (riSAM)",
