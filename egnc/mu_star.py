@@ -27,8 +27,8 @@ root. All factors are solved at once by Newton steps in mu (`dG/dmu` in closed f
 large-r asymptote `mu* ~ 1/2 + c^4 / r^2` (capped below 1), kept in the bracket [1/2, 1]: a step
 that would leave it (or is not a number) is a bisection instead. They stop when every step is
 below 1e-14. Newton converges quadratically near the root, so that takes four to eight steps
-for residuals up to `30 c^2` (where the asymptote is still far off) and one or two beyond, each
-a handful of array operations.
+(at most twelve) for residuals up to `30 c^2`, where the asymptote is still far off, and one or
+two beyond, each a handful of array operations.
 
 References:
     - M. McGann, F. Dellaert, M. Kaess, "Robust Incremental Smoothing and Mapping (riSAM)",
@@ -50,8 +50,8 @@ MU_STAR_XATOL = 1e-14
 """Absolute tolerance on each root mu*."""
 
 _MAX_STEPS = 2 * math.ceil(math.log2(0.5 / MU_STAR_XATOL))
-"""Steps after which the solve stops whatever their size (twice the bisection halvings that would
-shrink the bracket [1/2, 1] below `MU_STAR_XATOL`; the solve takes at most about 16)."""
+"""Steps after which the solve stops whatever their size: twice the bisection halvings that would
+shrink the bracket [1/2, 1] below `MU_STAR_XATOL` (it took at most 12 for c from 0.5 to 10)."""
 
 
 def convexity_margin(mu: ArrayLike, log_r2: ArrayLike, log_c2: ArrayLike) -> np.ndarray:
