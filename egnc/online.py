@@ -434,7 +434,7 @@ class OnlineSolver:
             raise GraphError("information matrices must be symmetric")
         if k and np.any(np.linalg.eigvalsh(0.5 * (info + info.swapaxes(1, 2)))[:, 0] <= 0.0):
             raise GraphError("information matrices must be positive definite")
-        reached: set[int] = set()  # poses this batch's odometry places; the solver's ids are not copied
+        reached: set[int] = set()  # ends of this batch's edges so far: an edge may start where an earlier one ends
         for i, j in pairs.tolist():
             if i == j:
                 raise GraphError(f"an edge joins pose {i} to itself")
