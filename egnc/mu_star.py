@@ -110,6 +110,8 @@ def mu_star(r: ArrayLike, c: float = 3.0) -> np.ndarray:
     flat = r.ravel()
     out = np.ones(flat.shape)
     (active,) = np.nonzero(flat > c / math.sqrt(3.0))
+    if not active.size:  # every factor inside the always-convex radius (most online updates)
+        return out.reshape(r.shape)
     log_c2 = 2.0 * math.log(c)
     log_r2 = 2.0 * np.log(flat[active])
     # G(1/2) = q^2 underflows to 0 only when c^2 / r < 1e-160, where mu* = 1/2 to the last bit.
