@@ -3,7 +3,7 @@
     python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
         [--regraduate reference|new] [--region-hops N] [--boundary-share S] [--strong-at-arrival] [--decide-at-arrival]
-        [--rel-cost-tol TOL] [--linear-solver auto]
+        [--rel-cost-tol TOL] [--linear-solver auto] [--repeats N]
         [--json results.jsonl]
 
 For every dataset and percentage, the clean graph's least-squares optimum is the reference; the
@@ -30,6 +30,12 @@ Columns:
 - `p50`, `p99`, `max`: update latency in milliseconds over all updates; `loop p50`: over the
   updates that added a loop closure.
 - `ratio`: egnc's total time and iterations over risam's on the same replay.
+
+With `--repeats N` every case replays each method N times, the methods' order reversed on every
+other repeat (egnc, risam, then risam, egnc, ...), so that a drift of the machine's speed weighs on
+both alike. The time columns (`total s`, `decide s`, the latencies) are then medians over the
+repeats, and `ratio` gives the median of the repeats' own time ratios with their range. The
+replays are deterministic: every other column must agree between repeats, or the bench stops.
 """
 
 from __future__ import annotations
@@ -134,6 +140,24 @@ def cases(args: argparse.Namespace):
         yield name, percent, log.graph, log.is_outlier, log.is_odometry, reference
 
 
+TIMES = ("total_s", "decide_s", "p50", "p99", "max", "loop_p50")
+"""Row fields that are timings: a median over repeats. Every other field must repeat exactly."""
+
+
+def combined(rows: list[dict]) -> dict:
+    """One row from the repeats `rows` of a method on a case: the timings' medians (`TIMES`).
+
+    Raises:
+        SystemExit: a field other than a timing differs between repeats.
+    """
+    first = rows[0]
+    for row in rows[1:]:
+        differing = [key for key in first if key not in TIMES and row[key] != first[key]]
+        if differing:
+            raise SystemExit(f"{first['method']}: repeats differ in {', '.join(differing)}")
+    return {**first, **{key: float(np.median([row[key] for row in rows])) for key in TIMES}}
+
+
 HEADER = (
     "| dataset | % | method | P | R | P now | R now | ATE (m) | ATE now (m) | updates | loop updates | decided"
     " | restarted | iterations"
@@ -160,8 +184,11 @@ def main() -> int:
         "--rel-cost-tol", type=float, help="OnlineOptions.rel_cost_tol (default: its default): where an update stops"
     )
     parser.add_argument("--linear-solver", default="auto")
+    parser.add_argument("--repeats", type=int, default=1, help="replays of each method per case, alternating")
     parser.add_argument("--json", type=Path, help="append one JSON line per row here")
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error("--repeats must be at least 1")
 
     import egnc
 
@@ -172,14 +199,21 @@ def main() -> int:
     )
     print(HEADER)
     print("|" + "---|" * (HEADER.count("|") - 1))
+    methods = args.methods.split(",")
     for name, percent, graph, is_outlier, known, reference in cases(args):
-        rows = [run(graph, is_outlier, known, reference, method, args) for method in args.methods.split(",")]
-        by_method = {row["method"]: row for row in rows}
+        repeats: dict[str, list[dict]] = {method: [] for method in methods}
+        for repeat in range(args.repeats):
+            for method in methods if repeat % 2 == 0 else methods[::-1]:
+                repeats[method].append(run(graph, is_outlier, known, reference, method, args))
+        rows = [combined(repeats[method]) for method in methods]
         for row in rows:
             ratio = ""
-            if row["method"] == "egnc" and "risam" in by_method:
-                other = by_method["risam"]
-                ratio = f"{row['total_s'] / other['total_s']:.2f}x / {row['iterations'] / other['iterations']:.2f}x"
+            if row["method"] == "egnc" and "risam" in repeats:
+                times = [e["total_s"] / r["total_s"] for e, r in zip(repeats["egnc"], repeats["risam"])]
+                spread = f" ({min(times):.2f}-{max(times):.2f})" if len(times) > 1 else ""
+                iterations = row["iterations"] / repeats["risam"][0]["iterations"]
+                ratio = f"{np.median(times):.2f}x{spread} / {iterations:.2f}x"
+                row = {**row, "time_ratios": times}
             print(
                 f"| {name} | {percent:.0f} | {row['method']} | {row['P']:.4f} | {row['R']:.4f} | {row['P_now']:.4f}"
                 f" | {row['R_now']:.4f} | {row['ate']:.4f} | {row['ate_now']:.4f} | {row['updates']}"
@@ -190,7 +224,7 @@ def main() -> int:
             )
             if args.json is not None:
                 with open(args.json, "a", encoding="utf-8") as out:
-                    out.write(json.dumps({"dataset": name, "percent": percent, **row}) + "\n")
+                    out.write(json.dumps({"dataset": name, "percent": percent, "repeats": args.repeats, **row}) + "\n")
     return 0
 
 
