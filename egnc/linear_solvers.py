@@ -452,6 +452,13 @@ def _cholmod_triangular(factor: Any) -> TriangularFactor:
     return TriangularFactor(lower, np.asarray(factor.P(), dtype=np.int64), None)
 
 
+_RSLAB_COLUMNS = 8
+"""Right-hand-side columns an rslab factorization solves at once. Its `solve_many` costs the same
+per column at 8 columns as at 64, and holds about seven column-sized arrays per column: 64 columns
+over 300 000 unknowns peaked 0.9 GiB above 8 (BENCHMARKS.md, issue 18). It reads the columns in
+Fortran order without a copy."""
+
+
 class RslabSolver:
     """rslab's supernodal `L D L^T` with the analysis done once, one thread."""
 
@@ -489,8 +496,13 @@ class RslabSolver:
             )
 
         def solve(rhs: np.ndarray) -> np.ndarray:
-            rhs = np.ascontiguousarray(rhs, dtype=np.float64)
-            return factor.solve(rhs) if rhs.ndim == 1 else factor.solve_many(rhs)
+            if rhs.ndim == 1:
+                return factor.solve(np.ascontiguousarray(rhs, dtype=np.float64))
+            out = np.empty(rhs.shape)
+            for start in range(0, rhs.shape[1], _RSLAB_COLUMNS):
+                columns = slice(start, start + _RSLAB_COLUMNS)
+                out[:, columns] = factor.solve_many(np.asfortranarray(rhs[:, columns], dtype=np.float64))
+            return out
 
         return _Factorization(solve)
 

@@ -101,12 +101,14 @@ def test_factorization_solves_like_a_dense_solve(backend, lower_only):
     stored = sp.csc_matrix(np.tril(matrix) if lower_only else matrix)
     solver = make_linear_solver(backend, stored.indptr, stored.indices)
     rng = np.random.default_rng(1)
-    b, B = rng.normal(size=60), rng.normal(size=(60, 4))
+    # More columns than rslab solves at once (`_RSLAB_COLUMNS`), in either memory order.
+    b, B = rng.normal(size=60), rng.normal(size=(60, 19))
     for values in (stored.data, 2.0 * stored.data):  # a second factorization of the same pattern
         solve = solver.factorize(values)
         dense = matrix * values[0] / stored.data[0]
         np.testing.assert_allclose(solve(b), np.linalg.solve(dense, b), rtol=1e-10, atol=1e-12)
-        np.testing.assert_allclose(solve(B), np.linalg.solve(dense, B), rtol=1e-10, atol=1e-12)
+        for rhs in (B, np.asfortranarray(B)):
+            np.testing.assert_allclose(solve(rhs), np.linalg.solve(dense, B), rtol=1e-10, atol=1e-12)
 
 
 @needs_rslab
