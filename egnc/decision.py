@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -168,6 +169,7 @@ def readmitted(
     quantile: float,
     information: Factorization | None = None,
     weights: np.ndarray | None = None,
+    estimate: ReachEstimate | None = None,
 ) -> np.ndarray:
     """`(E,)` bool: the `rejected` edges that the map of `problem` agrees with.
 
@@ -189,6 +191,9 @@ def readmitted(
             None factorizes it here.
         weights: `(E_problem,)` weight of each of `problem`'s edges in its information (0: an edge
             of its pattern left out, `RoundProblem`); None: 1.
+        estimate: `ReachEstimate.of(problem)` (`RoundProblem.reach_estimate`: it depends on the
+            pattern only), or None for none: the factor may then be exported for any large
+            system (`egnc.marginals.quadratic_form`).
     """
     threshold = chi2_quantile(quantile, factors.information.shape[-1])
     # The innovation statistic is at most r^2 (its covariance adds the map's to the loop's own):
@@ -201,7 +206,6 @@ def readmitted(
         return passed
     try:
         covariance_solve = covariance_solver(problem, poses, weights) if information is None else information
-        estimate = ReachEstimate.of(problem)  # whether exporting the factor can pay (egnc.marginals)
         if _all_agree(problem, poses, factors, candidates, (covariance_solve, estimate), threshold):
             return rejected.copy()
         floor = _statistic_floor(factors.subset(np.sort(candidates)), poses)
@@ -390,6 +394,12 @@ class RoundProblem:
 
     edges: np.ndarray
     problem: Problem
+
+    @cached_property
+    def reach_estimate(self) -> ReachEstimate | None:
+        """`ReachEstimate.of(problem)`: whether exporting the information's factor can pay for
+        re-admission's queries (`egnc.marginals`), computed once for every round on this problem."""
+        return ReachEstimate.of(self.problem)
 
     @classmethod
     def over(cls, graph: PoseGraph, factors: BetweenFactors, edges: np.ndarray, linear_solver: str) -> RoundProblem:
@@ -599,7 +609,8 @@ def decide_outliers(
         if gnc_options.readmit:
             information = round_information(problem, refined)
             weights = round_system.weights(inliers)
-            back = readmitted(problem, refined.poses, factors, ~inliers, r, readmit_at, information, weights)
+            estimate = round_system.reach_estimate
+            back = readmitted(problem, refined.poses, factors, ~inliers, r, readmit_at, information, weights, estimate)
             problem.step_solver.discard_factorization()  # not held while a new round problem is built
             ever_readmitted |= back
         decided = classified(r, back)

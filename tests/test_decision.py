@@ -338,7 +338,7 @@ def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch
     graph, robust = corrupted.graph, corrupted.graph.is_loop_closure
     solved = []  # (classification, truncated cost at its least-squares map) of every round
 
-    def readmit_all(problem, poses, factors, rejected, r, quantile, information=None, weights=None):
+    def readmit_all(problem, poses, factors, rejected, r, quantile, information=None, weights=None, estimate=None):
         solved.append((~rejected, truncated_cost(r, robust, 3, 0.99)))
         return rejected
 
@@ -444,14 +444,18 @@ def test_rounds_that_readmit_loops_share_one_analysis_on_large_systems(monkeypat
     factors = BetweenFactors.from_graph(graph)
     inliers = ~corrupted.is_outlier
     inliers[np.flatnonzero(robust & ~corrupted.is_outlier)[:30]] = False  # true loops the first round lacks
-    built = []
+    built, estimated = [], []
     over = decision_module.RoundProblem.over
     monkeypatch.setattr(decision_module.RoundProblem, "over", lambda *args: built.append(args) or over(*args))
+    estimate = decision_module.ReachEstimate.of
+    counted = classmethod(lambda cls, problem: estimated.append(problem) or estimate(problem))
+    monkeypatch.setattr(decision_module.ReachEstimate, "of", counted)
     decision = decide_outliers(
         graph, to_matrices(2, start), robust, SolverOptions(), GncOptions(), "auto", factors, inliers=inliers
     )
     assert len(decision.reports) >= 2 and decision.settled
     assert np.array_equal(decision.inliers, ~corrupted.is_outlier)  # the 30 came back, no false loop did
+    assert len(estimated) == len(built)  # re-admission's reach estimated once per problem, not per round
     if shared:
         assert len(built) == 1
     else:
