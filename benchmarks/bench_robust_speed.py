@@ -2,7 +2,8 @@
 
     python benchmarks/bench_robust_speed.py [--datasets manhattanOlson3500,sphere2500]
         [--percent 10,30,50] [--seeds 1] [--backends cholmod,scipy] [--direct] [--before]
-        [--large] [--grid 100000,...] [--grid3d 50000,...] [--clean-init auto|file|chordal] [--importtime]
+        [--large] [--grid 100000,...] [--grid3d 50000,...] [--clean-init auto|file|chordal] [--repeats N]
+        [--importtime]
 
 Each row runs in two child processes, so that each solve's peak resident memory is its own: the
 first reads the file (or generates the grid), solves its least squares untimed from the file's
@@ -31,6 +32,10 @@ starts.
   instead of the lower of the two minima (`auto`, the default): from the chained odometry of a
   large grid LM stops in a folded map (3D, 50k poses: 100 iterations, cost 180x the optimum),
   which is no reference for the decisions nor for the time.
+- `--repeats N`: time each case N times, the clean and robust children in turn (clean first,
+  then robust first, ...: the machine's drift falls on both alike). The time and memory columns
+  are medians, the ratio the median of the repeats' own ratios with their range; the script
+  stops if two repeats differ in anything else (the solves are deterministic).
 - `--importtime`: print the slowest imports of `python -X importtime -c "import egnc"`.
 
 Precision and recall count false loops as positives; ATE is against the clean optimum (m).
@@ -150,13 +155,41 @@ def _child(case: dict) -> tuple[dict, float]:
     return json.loads(output.strip().splitlines()[-1]), usage.ru_maxrss / 1024  # kilobytes on Linux
 
 
-def run_child(case: dict) -> dict:
-    """Run `case`'s clean and robust solves, each in its own child process, with their peak memory."""
+def run_child(case: dict, repeats: int = 1) -> dict:
+    """Run `case`'s clean and robust solves `repeats` times, each in its own child process, with
+    their peak memory; several repeats are merged by `combined`."""
+    rows = []
     with tempfile.TemporaryDirectory() as folder:
         case = case | {"reference": str(Path(folder) / "reference.npy")}
-        clean, clean_mib = _child(case | {"phase": "clean"})
-        robust, robust_mib = _child(case | {"phase": "robust"})
-    return clean | robust | {"clean_mib": clean_mib, "peak_mib": robust_mib}
+        for repeat in range(repeats):
+            phases = ("clean", "robust") if repeat % 2 == 0 else ("robust", "clean")  # the reference exists by then
+            done = {phase: _child(case | {"phase": phase}) for phase in phases}
+            (clean, clean_mib), (robust, robust_mib) = done["clean"], done["robust"]
+            rows.append(clean | robust | {"clean_mib": clean_mib, "peak_mib": robust_mib})
+    return combined(rows)
+
+
+MEASURED = ("clean_s", "robust_s", "clean_mib", "peak_mib", "direct_s", "before_s")
+"""Fields that differ from run to run: merged as medians over repeats; every other field must agree."""
+
+
+def combined(rows: list[dict]) -> dict:
+    """One row from the repeats `rows` of a case: medians of `MEASURED`, and `ratio` (the median of
+    each repeat's robust / clean time) with `ratio_range` (its lowest and highest).
+
+    Raises:
+        SystemExit: two repeats differ in a field outside `MEASURED`.
+    """
+    import numpy as np
+
+    first = rows[0]
+    for row in rows[1:]:
+        differing = [key for key in first if key not in MEASURED and row[key] != first[key]]
+        if differing:
+            raise SystemExit(f"repeats differ in {', '.join(differing)}")
+    ratios = [row["robust_s"] / row["clean_s"] for row in rows]
+    medians = {key: float(np.median([row[key] for row in rows])) for key in MEASURED if key in first}
+    return {**first, **medians, "ratio": float(np.median(ratios)), "ratio_range": (min(ratios), max(ratios))}
 
 
 def import_times(top: int = 12) -> list[tuple[int, int, str]]:
@@ -190,6 +223,7 @@ def main() -> None:
     parser.add_argument("--grid", default="", help="generated 2D grids of these pose counts, at each --percent")
     parser.add_argument("--grid3d", default="", help="generated 3D grids of these pose counts, at each --percent")
     parser.add_argument("--clean-init", choices=("auto", "file", "chordal"), default="auto")
+    parser.add_argument("--repeats", type=int, default=1, help="times each case is timed, clean and robust in turn")
     parser.add_argument("--importtime", action="store_true")
     args = parser.parse_args()
     if args.case:
@@ -232,11 +266,13 @@ def main() -> None:
         + "---:|---|" * extra.count("same")
     )
     for case in cases:
-        f = run_child(case | {"direct": args.direct, "before": args.before, "clean_init": args.clean_init})
+        options = {"direct": args.direct, "before": args.before, "clean_init": args.clean_init}
+        f = run_child(case | options, args.repeats)
+        spread = f" ({f['ratio_range'][0]:.1f}-{f['ratio_range'][1]:.1f})" if args.repeats > 1 else ""
         row = (
             f"| {case['dataset']} | {case['percent']:g} | {case['seed']} | {case['backend']} | {f['clean_init']}"
             f" | {f['clean_s']:.3f}"
-            f" | {f['robust_s']:.3f} | {f['robust_s'] / f['clean_s']:.1f} | {'+'.join(map(str, f['iterations']))}"
+            f" | {f['robust_s']:.3f} | {f['ratio']:.1f}{spread} | {'+'.join(map(str, f['iterations']))}"
             f" | {f['cg']} | {f['analyses']} | {f['rounds']} | {f['rejected']} / {f['false']} | {f['precision']:.4f}"
             f" | {f['recall']:.4f} | {f['ate']:.2e} | {f['clean_mib']:.0f} | {f['peak_mib']:.0f}"
             f" | {f['peak_mib'] / f['clean_mib']:.2f} |"

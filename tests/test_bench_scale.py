@@ -79,3 +79,23 @@ def test_reach_bench_rows_agree_with_the_whole_solve_and_say_which_path_the_defa
         assert 0.0 < float(row[5]) <= 1.0 and 0.0 < float(row[6]) <= 1.0  # shares of rows and entries
         assert row[11] == "whole"  # fewer unknowns than REACH_MIN_UNKNOWNS
         assert float(row[12]) < 1e-10
+
+
+def test_robust_speed_repeats_give_the_median_ratio_and_its_range():
+    options = ("--datasets", "", "--grid", "300", "--percent", "30", "--backends", "scipy", "--repeats", "3")
+    (row,) = rows("bench_robust_speed.py", *options)
+    assert row[:4] == ["grid2d-300", "30", "1", "scipy"]
+    median, spread = row[7].split(" ")
+    low, high = (float(part) for part in spread.strip("()").split("-"))
+    assert low <= float(median) <= high and float(row[5]) > 0 and float(row[6]) > 0
+
+
+def test_robust_speed_refuses_repeats_that_decide_differently():
+    sys.path.insert(0, str(BENCHMARKS))  # the benchmarks are scripts, imported as test_fuzz imports fuzz
+    import bench_robust_speed
+
+    first = {"clean_s": 1.0, "robust_s": 3.0, "clean_mib": 10.0, "peak_mib": 15.0, "rejected": 5}
+    merged = bench_robust_speed.combined([first, first | {"clean_s": 2.0, "robust_s": 2.0}, first])
+    assert merged["ratio"] == 3.0 and merged["ratio_range"] == (1.0, 3.0) and merged["clean_s"] == 1.0
+    with pytest.raises(SystemExit, match="rejected"):
+        bench_robust_speed.combined([first, first | {"rejected": 6}])
