@@ -319,7 +319,10 @@ def map_credit(relative: np.ndarray, own: np.ndarray) -> np.ndarray:
     """
     own_trace = np.trace(own, axis1=1, axis2=2)
     relative_trace = np.trace(relative, axis1=1, axis2=2)
-    return np.minimum(1.0, own_trace / np.maximum(relative_trace, np.finfo(float).tiny))
+    credit = np.ones(len(own))
+    weak = relative_trace > own_trace  # divided only there: a map share of 0 (fixed poses) overflowed
+    credit[weak] = own_trace[weak] / relative_trace[weak]
+    return credit
 
 
 def _any_passes_alone(

@@ -628,3 +628,12 @@ def test_credited_covariance_scales_the_map_share_of_weak_loops_to_their_own_siz
     for k in (1, 2):
         assert np.trace(relative[3 * k : 3 * k + 3, 3 * k : 3 * k + 3]) > np.trace(own[k])
         np.testing.assert_allclose(np.trace(map_part[3 * k : 3 * k + 3, 3 * k : 3 * k + 3]), np.trace(own[k]))
+
+
+def test_map_credit_of_a_loop_the_map_fixes_exactly_is_one_without_overflow():
+    # A loop between two fixed poses: the map's covariance of its relative pose is zero.
+    own = np.stack([np.eye(3) * 4.0, np.eye(3) * 0.5, np.eye(3)])
+    relative = np.stack([np.zeros((3, 3)), np.eye(3) * 0.1, np.eye(3) * 2.0])
+    with np.errstate(all="raise"):
+        credit = decision_module.map_credit(relative, own)
+    np.testing.assert_allclose(credit, [1.0, 1.0, 0.5])
