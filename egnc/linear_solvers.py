@@ -455,8 +455,8 @@ def _cholmod_triangular(factor: Any) -> TriangularFactor:
 _RSLAB_COLUMNS = 8
 """Right-hand-side columns an rslab factorization solves at once. Its `solve_many` costs the same
 per column at 8 columns as at 64, and holds about seven column-sized arrays per column: 64 columns
-over 300 000 unknowns peaked 0.9 GiB above 8 (BENCHMARKS.md, issue 18). It reads the columns in
-Fortran order without a copy."""
+over 300 000 unknowns peaked 0.9 GiB above 8 (BENCHMARKS.md, issue 18). It takes Fortran-ordered
+columns (what a sparse matrix's `toarray` gives) without a copy."""
 
 
 class RslabSolver:
