@@ -150,12 +150,9 @@ def combined(rows: list[dict]) -> dict:
     Raises:
         SystemExit: a field other than a timing differs between repeats.
     """
-    first = rows[0]
-    for row in rows[1:]:
-        differing = [key for key in first if key not in TIMES and row[key] != first[key]]
-        if differing:
-            raise SystemExit(f"{first['method']}: repeats differ in {', '.join(differing)}")
-    return {**first, **{key: float(np.median([row[key] for row in rows])) for key in TIMES}}
+    from egnc.bench.report import merged_repeats
+
+    return merged_repeats(rows, TIMES, rows[0]["method"])
 
 
 HEADER = (

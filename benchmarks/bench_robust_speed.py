@@ -182,14 +182,11 @@ def combined(rows: list[dict]) -> dict:
     """
     import numpy as np
 
-    first = rows[0]
-    for row in rows[1:]:
-        differing = [key for key in first if key not in MEASURED and row[key] != first[key]]
-        if differing:
-            raise SystemExit(f"repeats differ in {', '.join(differing)}")
+    from egnc.bench.report import merged_repeats
+
     ratios = [row["robust_s"] / row["clean_s"] for row in rows]
-    medians = {key: float(np.median([row[key] for row in rows])) for key in MEASURED if key in first}
-    return {**first, **medians, "ratio": float(np.median(ratios)), "ratio_range": (min(ratios), max(ratios))}
+    merged = merged_repeats(rows, MEASURED)
+    return {**merged, "ratio": float(np.median(ratios)), "ratio_range": (min(ratios), max(ratios))}
 
 
 def import_times(top: int = 12) -> list[tuple[int, int, str]]:

@@ -19,7 +19,15 @@ from egnc.errors import EgncError
 from egnc.io.atomic import atomic_text_file
 from egnc.plot import save_figure
 
-__all__ = ["SUCCESS_DEFINITION", "SummaryRow", "format_markdown", "installed_versions", "summarize", "write_outputs"]
+__all__ = [
+    "SUCCESS_DEFINITION",
+    "SummaryRow",
+    "format_markdown",
+    "installed_versions",
+    "merged_repeats",
+    "summarize",
+    "write_outputs",
+]
 
 SUCCESS_DEFINITION = (
     "Precision and recall count the false loop closures as the positive class: precision = rejected "
@@ -246,6 +254,21 @@ def _plot_precision_recall(rows: Sequence[SummaryRow], path: Path) -> None:
         ax.set_title(name)
     figure.colorbar(image, ax=list(axes), shrink=0.9)
     save_figure(figure, path, dpi=PLOT_DPI)
+
+
+def merged_repeats(rows: Sequence[dict], measured: Sequence[str], label: str = "") -> dict:
+    """One row from the repeats `rows` of a deterministic benchmark run: the median of each
+    `measured` field present (times, memory), every other field as all repeats have it.
+
+    Raises:
+        SystemExit: two repeats differ in a field outside `measured` (`label` names the run).
+    """
+    first = rows[0]
+    for row in rows[1:]:
+        differing = [key for key in first if key not in measured and row[key] != first[key]]
+        if differing:
+            raise SystemExit(f"{label}{': ' if label else ''}repeats differ in {', '.join(differing)}")
+    return {**first, **{key: float(np.median([row[key] for row in rows])) for key in measured if key in first}}
 
 
 def installed_versions(packages: Sequence[str], show_absent: bool = True) -> str:
