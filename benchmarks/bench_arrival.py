@@ -1,4 +1,4 @@
-"""How well an online update's stages are predicted at arrival (`egnc.arrival`), against solving them.
+"""How well an online update's stages are predicted at arrival (`egnc.online.arrival`), against solving them.
 
     python benchmarks/bench_arrival.py [--datasets csail,intel,manhattanOlson3500] [--percents 10,30,50]
         [--seeds 0]
@@ -7,7 +7,7 @@ Each case (riSAM-protocol false loops, `egnc.datasets.add_false_loops`) is repla
 schedule and *every* update solved, as by default; at each loop update the solver also predicts
 it as `OnlineOptions(decide_at_arrival=True)` would (a subclass overrides the private method that
 answers, and answers "solve"), so that the prediction is compared with the solve on the same
-states. Poses and edges are fed as `egnc.replay` feeds them (`add_gauge`, `add_step`).
+states. Poses and edges are fed as `egnc.online.replay` feeds them (`add_gauge`, `add_step`).
 
 Columns:
 - `predicted loops`: new loops of the updates whose first stage was predicted (the others lack
@@ -43,9 +43,9 @@ HEADER = (
 
 def run(graph, known) -> str:
     """Replay one corrupted graph; its row's cells after the first three."""
-    from egnc.losses import KernelLoss
     from egnc.online import OnlineOptions, OnlineSolver
-    from egnc.replay import add_gauge, add_step, replay_steps
+    from egnc.online.replay import add_gauge, add_step, replay_steps
+    from egnc.robust.losses import KernelLoss
 
     watch: dict = {}
 
@@ -97,7 +97,7 @@ def main() -> int:
     from egnc.api import solve
     from egnc.datasets import add_false_loops
     from egnc.io import read_g2o
-    from egnc.replay import replay_steps
+    from egnc.online.replay import replay_steps
 
     print(
         f"egnc {egnc.__version__}, Python {platform.python_version()}, numpy {np.__version__},"

@@ -5,9 +5,9 @@
 
 For every row (shared files from their own guess, the drifted variants of benchmarks/bench_drifted.py,
 shared files with riSAM-protocol false loops at seed 1, extra files from elsewhere) it prints the
-truncated least-squares cost (`egnc.decision.truncated_cost`) at the initial guess (`T guess`)
+truncated least-squares cost (`egnc.robust.decision.truncated_cost`) at the initial guess (`T guess`)
 and at the chordal initialization of every edge (`T chordal`, its solve time `chordal s`), which
-`egnc.starts.all_edges_decision` compares before it runs; the default's decision (`rejected`,
+`egnc.robust.starts.all_edges_decision` compares before it runs; the default's decision (`rejected`,
 `start`, `T`, `s`); and the decision of the GNC stage run from the chordal map of every edge
 alone (`egnc.solve(graph, init="chordal")` with every other start off: `from chordal`), which is
 what the fourth start adds where its gates open. On corrupted rows that last solve takes minutes
@@ -28,11 +28,11 @@ import egnc
 from egnc.api import initial_guess
 from egnc.bench.cases import least_squares_optimum
 from egnc.datasets import add_false_loops
-from egnc.decision import truncated_cost
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import START_OPTIONS, GncOptions
 from egnc.graph import PoseGraph
 from egnc.metrics import precision_recall
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.robust.decision import truncated_cost
+from egnc.robust.gnc import START_OPTIONS, GncOptions
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_drifted import DEFAULT_DATA, DRIFTED, SHARED, cases, load  # noqa: E402

@@ -10,7 +10,7 @@ deviation), this prints the loop closures each method rejects and the least-squa
 reaches, relative to the least-squares optimum (the lower of `l2` from the guess and from the
 chordal initialization):
 
-- `egnc`: the default (`egnc.solve`), with its other starts (`egnc.gnc.START_OPTIONS`:
+- `egnc`: the default (`egnc.solve`), with its other starts (`egnc.robust.gnc.START_OPTIONS`:
   `GncOptions.runs_start`, `chordal_start`, `chordal_all_start`, `regroup_start`,
   `elimination_start`);
 - `guess only`: the default before them (all off);
@@ -34,12 +34,12 @@ import egnc
 from egnc.bench.child import Outcome, run_in_child
 from egnc.bench.gtsam import gtsam_available, gtsam_solve
 from egnc.datasets import grid_world
-from egnc.factors import BetweenFactors, from_matrices, to_matrices
-from egnc.gnc import START_OPTIONS, GncOptions
 from egnc.graph import PoseGraph
-from egnc.initialize import initialize_poses
-from egnc.kernels import chi2_quantile
 from egnc.lie import so3
+from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
+from egnc.nonlinear.initialize import initialize_poses
+from egnc.robust.gnc import START_OPTIONS, GncOptions
+from egnc.robust.kernels import chi2_quantile
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 SHARED = (

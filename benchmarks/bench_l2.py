@@ -46,10 +46,10 @@ from gtsam_baseline import dataset_path, g2o_is_3d, lm_params  # noqa: E402
 from egnc import solve  # noqa: E402
 from egnc.bench import add_gtsam_reference_prior  # noqa: E402
 from egnc.cli import solve as cli  # noqa: E402
-from egnc.factors import to_matrices  # noqa: E402
 from egnc.io import read_g2o  # noqa: E402
-from egnc.least_squares import Problem, SolverOptions, solve_least_squares  # noqa: E402
-from egnc.linear_solvers import serial_native_threads  # noqa: E402
+from egnc.linalg.linear_solvers import serial_native_threads  # noqa: E402
+from egnc.nonlinear.factors import to_matrices  # noqa: E402
+from egnc.nonlinear.least_squares import Problem, SolverOptions, solve_least_squares  # noqa: E402
 
 DEFAULT_FILES = ("manhattanOlson3500", "city10000", "sphere2500")
 GTSAM_TOL = 1e-10

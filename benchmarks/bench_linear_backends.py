@@ -116,8 +116,8 @@ def backend_setup(backend: str, graph, fixed: np.ndarray):
 
     `data` is the first matrix's CSC data, for backends whose analysis reads values too.
     """
-    from egnc.linear_solvers import CholmodSolver, RslabSolver, ScipySolver, block_order
-    from egnc.normal_equations import NormalEquationsPattern
+    from egnc.linalg.linear_solvers import CholmodSolver, RslabSolver, ScipySolver, block_order
+    from egnc.linalg.normal_equations import NormalEquationsPattern
 
     free_block = np.cumsum(~fixed) - 1
     pairs = free_block[graph.edges[~fixed[graph.edges].any(axis=1)]]
@@ -256,7 +256,7 @@ def pyamg_factorize(csc) -> Factorize:
 
 def run_case(case: str, backend: str, graph_file: str, repeat: int, budget: float) -> dict:
     """Time one backend on one case in this process (the child's side)."""
-    from egnc.factors import BetweenFactors, to_matrices
+    from egnc.nonlinear.factors import BetweenFactors, to_matrices
 
     with open(graph_file, "rb") as stream:
         graph = pickle.load(stream)

@@ -23,7 +23,7 @@ import numpy as np
 import egnc
 from egnc.bench import format_markdown, run_grid, summarize
 from egnc.graph import PoseGraph
-from egnc.initialize import initialize_poses
+from egnc.nonlinear.initialize import initialize_poses
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 

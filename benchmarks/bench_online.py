@@ -8,7 +8,7 @@
 
 For every dataset and percentage, the clean graph's least-squares optimum is the reference; the
 graph is corrupted with riSAM-protocol false loops (`egnc.datasets.add_false_loops`, seeded) and
-replayed pose by pose through `egnc.replay` with each method in turn, in this process, one run at
+replayed pose by pose through `egnc.online.replay` with each method in turn, in this process, one run at
 a time. An IRL log (`--irl`, default manhattan_noisy) is replayed as it is and scored against its
 own labels; its reference is the least-squares optimum without the labelled outliers.
 
@@ -57,7 +57,7 @@ def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespa
     """Replay one graph with one method; the row's figures."""
     from egnc.metrics import ate, precision_recall
     from egnc.online import OnlineOptions
-    from egnc.replay import latency_summary, replay, replay_steps
+    from egnc.online.replay import latency_summary, replay, replay_steps
 
     options = OnlineOptions(
         regraduate=args.regraduate,

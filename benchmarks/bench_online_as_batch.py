@@ -8,9 +8,9 @@ Every `.g2o` and `.irl` file of `--data` (default: the shared datasets; a single
 smallest first, or the names given by `--files` in that order, is solved two ways:
 
 - `batch`: today's default, `egnc.solve(graph)` (method egnc, restarted stages);
-- `online`: `egnc.replay.replay(graph, "egnc")`, the file replayed pose by pose through the
+- `online`: `egnc.online.replay.replay(graph, "egnc")`, the file replayed pose by pose through the
   online solver (EGNC's per-loop `mu*` graduation from the running estimate), ending with
-  `OnlineSolver.result()`, the batch decision (`egnc.decision`) on the online estimate.
+  `OnlineSolver.result()`, the batch decision (`egnc.robust.decision`) on the online estimate.
 
 Both on the clean graph and on each corruption: riSAM-protocol false loops
 (`egnc.datasets.add_false_loops(graph, percent, seed=seed, reference_poses=<clean LS optimum>)`,
@@ -95,7 +95,7 @@ def solve_and_score(variant: Variant, method: str, linear_solver: str) -> dict:
     from egnc.api import solve
     from egnc.errors import GraphError
     from egnc.metrics import ate, precision_recall
-    from egnc.replay import replay
+    from egnc.online.replay import replay
 
     graph, known = variant.graph, variant.known_inliers
     started = time.perf_counter()

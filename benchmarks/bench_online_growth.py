@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 import egnc
-from egnc.factors import from_matrices, to_matrices
+from egnc.nonlinear.factors import from_matrices, to_matrices
 from egnc.online import OnlineSolver
 
 INFORMATION = np.diag([100.0, 100.0, 400.0])

@@ -5,7 +5,7 @@
 
 For each generated grid (`egnc.datasets.grid_world`, seed 1, its guess as the linearization
 point) `--loops` random loop closures are left out of the map, as a readmission batch is, and
-`egnc.marginals.quadratic_form` computes their `B^T H^-1 B` (`3 --loops` columns in 2D, `6
+`egnc.nonlinear.marginals.quadratic_form` computes their `B^T H^-1 B` (`3 --loops` columns in 2D, `6
 --loops` in 3D) from one factorization of the map's information, both ways:
 
 - `whole s`: forward and back solves of every column over all unknowns;
@@ -29,11 +29,11 @@ from contextlib import contextmanager
 
 import numpy as np
 
-import egnc.marginals as marginals
+import egnc.nonlinear.marginals as marginals
 from egnc.datasets import grid_world
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.least_squares import Problem
-from egnc.linear_solvers import cholmod_available
+from egnc.linalg.linear_solvers import cholmod_available
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.least_squares import Problem
 
 
 def _median_time(run, repeats: int):
@@ -87,7 +87,7 @@ def measure(dim: int, poses: int, loops: int, backend: str, repeats: int) -> dic
 
 @contextmanager
 def _gates(min_unknowns: float, max_share: float) -> Iterator[None]:
-    """`egnc.marginals`' reach gates set to these values for the block."""
+    """`egnc.nonlinear.marginals`' reach gates set to these values for the block."""
     saved = marginals.REACH_MIN_UNKNOWNS, marginals.REACH_MAX_SHARE
     marginals.REACH_MIN_UNKNOWNS, marginals.REACH_MAX_SHARE = min_unknowns, max_share
     try:
@@ -97,7 +97,7 @@ def _gates(min_unknowns: float, max_share: float) -> Iterator[None]:
 
 
 def _quadratic_form(B, factorization, on_reach: bool) -> np.ndarray:
-    """`egnc.marginals.quadratic_form` solved on the reach (`on_reach`) or whole, whatever the gates say."""
+    """`egnc.nonlinear.marginals.quadratic_form` solved on the reach (`on_reach`) or whole, whatever the gates say."""
     with _gates(0, 1.0) if on_reach else _gates(np.inf, marginals.REACH_MAX_SHARE):
         return marginals.quadratic_form(B, factorization)
 

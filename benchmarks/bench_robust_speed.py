@@ -90,13 +90,13 @@ def run_robust(case: dict) -> dict:
     """Corrupt the graph against the saved reference and time the robust solve (the child's side)."""
     import numpy as np
 
-    import egnc.chordal
-    import egnc.step_solver
+    import egnc.linalg.step_solver
+    import egnc.nonlinear.chordal
     from egnc.api import solve
     from egnc.datasets import add_false_loops
-    from egnc.gnc import START_OPTIONS, GncOptions
-    from egnc.least_squares import SolverOptions
     from egnc.metrics import ate, precision_recall
+    from egnc.nonlinear.least_squares import SolverOptions
+    from egnc.robust.gnc import START_OPTIONS, GncOptions
 
     analyses = [0]
 
@@ -107,8 +107,8 @@ def run_robust(case: dict) -> dict:
 
         return make_counted
 
-    egnc.step_solver.make_linear_solver = counted(egnc.step_solver.make_linear_solver)
-    egnc.chordal.make_linear_solver = counted(egnc.chordal.make_linear_solver)
+    egnc.linalg.step_solver.make_linear_solver = counted(egnc.linalg.step_solver.make_linear_solver)
+    egnc.nonlinear.chordal.make_linear_solver = counted(egnc.nonlinear.chordal.make_linear_solver)
     backend = case["backend"]
     graph = _graph(case)
     reference_poses = np.load(case["reference"])

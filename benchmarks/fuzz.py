@@ -40,7 +40,7 @@ import egnc
 from egnc.cli.report import report_dict
 from egnc.errors import EgncError
 from egnc.io import IrlLog, read_g2o, read_irl, write_g2o, write_irl
-from egnc.least_squares import NOTHING_TO_OPTIMIZE
+from egnc.nonlinear.least_squares import NOTHING_TO_OPTIMIZE
 
 DATASETS = Path(__file__).parents[1] / "datasets"
 METHODS = ("l2", "egnc")

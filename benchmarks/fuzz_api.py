@@ -8,7 +8,7 @@ wrong-shaped arrays; and `PoseGraph`s made directly or with `dataclasses.replace
 graph with one array broken (information not positive definite, self-loops, no edges, ids
 unsorted, rows out of range, shapes wrong, a zero quaternion, NaN); and the online solver
 (`egnc.online`) built with junk options, given junk or inconsistent entries, asked for a result,
-a checkpoint or a load with junk arguments, and `egnc.replay.replay` with one junk argument.
+a checkpoint or a load with junk arguments, and `egnc.online.replay.replay` with one junk argument.
 Each must end in an
 `EgncError` (egnc's argument errors, `OptionError`, are `TypeError`s or `ValueError`s too) with
 a one-line message, within `fuzz.TIME_LIMIT_S`; anything else is a bug: a `TypeError` or
@@ -35,7 +35,7 @@ from egnc.api import marginal_covariances
 from egnc.errors import EgncError
 from egnc.io import read_g2o, read_irl, write_g2o
 from egnc.online import OnlineOptions, OnlineSolver
-from egnc.replay import replay
+from egnc.online.replay import replay
 
 JUNK: tuple[object, ...] = (
     None, 0, -1, 2.5, float("nan"), True, "", "x", b"bytes", [], [1, 2], {}, {"max_iterations": 5}, (None,),

@@ -31,7 +31,7 @@ import numpy as np
 from egnc.errors import EgncError
 from egnc.io import read_g2o
 from egnc.online import OnlineSolver
-from egnc.replay import replay
+from egnc.online.replay import replay
 
 CLASSES = ("clean error", "resumed", "message without the file", "multi-line message", "non-finite result",
            "crash", "hang")  # fmt: skip

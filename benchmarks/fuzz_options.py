@@ -3,7 +3,7 @@
 Each case sets one to three fields of `SolverOptions` and `GncOptions` to values drawn from two
 pools per field: `VALID` values and `INVALID` ones (NaN, infinities, negatives, out-of-range
 values, a float for an int, a string or None for a bool, unknown names). The pools are the
-specification, written independently of `egnc.checks`:
+specification, written independently of `egnc.graph.checks`:
 
 - a case with any invalid value must be refused at construction with an `EgncError`, `TypeError`
   or `ValueError` whose message names the field (else "accepted invalid", a bug);

@@ -4,7 +4,7 @@
         [--reference] [--output ESTIMATE.g2o]
 
 The non-robust incremental baseline that `egnc-solve FILE --online` is timed against
-(`bench_online_vs_isam2.py`). The steps are those of `egnc.replay` (`egnc.replay.replay_steps`
+(`bench_online_vs_isam2.py`). The steps are those of `egnc.online.replay` (`egnc.online.replay.replay_steps`
 on the file read by `egnc.io.read_g2o`, odometry = consecutive ids): one `ISAM2.update` per new
 pose with its odometry, then its loop closures, in file order, followed by
 `calculateEstimate()`. The first update also holds the gauge, the prior of the reference
@@ -48,7 +48,7 @@ from gtsam_baseline import lm_params, load_g2o, values_to_arrays
 
 from egnc.io import read_g2o
 from egnc.metrics import ate
-from egnc.replay import latency_summary, replay_steps
+from egnc.online.replay import latency_summary, replay_steps
 
 
 def replay_isam2(path: str, relinearize_threshold: float, relinearize_skip: int) -> dict:

@@ -53,9 +53,9 @@ from egnc.bench import (
 from egnc.datasets import make_noisy_manhattan
 from egnc.datasets.noisy_manhattan import DEFAULT_ODOMETRY_SIGMA, DEFAULT_OUTLIER_SIGMA
 from egnc.graph import PoseGraph
-from egnc.initialize import initialize_poses
 from egnc.io import read_g2o, read_irl, write_irl
 from egnc.metrics import ate, rpe
+from egnc.nonlinear.initialize import initialize_poses
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA_DIR = REPO.parent / "shared" / "datasets"

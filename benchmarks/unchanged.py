@@ -11,7 +11,7 @@ over all edges and the solve time. The cases:
   `egnc-bench`'s grid (csail, intel, manhattanOlson3500, sphere2500, city10000);
 - clean graphs whose guess is made worse (heading noise 0.1 and 0.3 rad per step, translation
   noise 10 times each step's sigma; seeds 1 and 2) on manhattanOlson3500, intel, sphere2500;
-- online replays (`egnc.replay`, method egnc) of csail, intel and manhattanOlson3500 at 30 %
+- online replays (`egnc.online.replay`, method egnc) of csail, intel and manhattanOlson3500 at 30 %
   (seed 1) and of manhattan_noisy.irl: the rejected set of the final decision and the total of
   the update times.
 
@@ -63,13 +63,8 @@ def load(data_dir: Path, name: str) -> egnc.PoseGraph:
 def drifted(graph: egnc.PoseGraph, kind: str, level: float, seed: int) -> egnc.PoseGraph:
     """`graph` with its guess re-chained from odometry with extra seeded noise (as `bench_drifted` did)."""
     from egnc.lie import so3
-
-    try:
-        from egnc.nonlinear.factors import from_matrices, to_matrices
-        from egnc.nonlinear.initialize import initialize_poses
-    except ImportError:  # the flat layout before the packages by capability
-        from egnc.factors import from_matrices, to_matrices  # type: ignore[no-redef]
-        from egnc.initialize import initialize_poses  # type: ignore[no-redef]
+    from egnc.nonlinear.factors import from_matrices, to_matrices
+    from egnc.nonlinear.initialize import initialize_poses
 
     rng = np.random.default_rng(seed)
     odometry = graph.is_odometry
@@ -128,7 +123,7 @@ def batch_row(group: str, name: str, graph: egnc.PoseGraph) -> dict:
 
 def online_row(name: str, graph: egnc.PoseGraph, known_inliers: np.ndarray) -> dict:
     """An online replay's final decision and update total."""
-    from egnc.replay import replay
+    from egnc.online.replay import replay
 
     start = time.perf_counter()
     outcome = replay(graph, "egnc", known_inliers=known_inliers)
@@ -187,7 +182,10 @@ def compare(args: argparse.Namespace) -> int:
     """Print the before/after table; 1 if any decision differs."""
     before = {(r["group"], r["case"]): r for r in map(json.loads, Path(args.before).read_text().splitlines())}
     after = {(r["group"], r["case"]): r for r in map(json.loads, Path(args.after).read_text().splitlines())}
-    print("| cases | same rejected edges and start | differ | largest relative cost change | median time after / before |")
+    print(
+        "| cases | same rejected edges and start | differ | largest relative cost change"
+        " | median time, after / before |"
+    )
     print("|---|---:|---|---:|---:|")
     differ_any = False
     for group in dict.fromkeys(key[0] for key in before):

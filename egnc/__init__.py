@@ -19,25 +19,29 @@ import importlib as _importlib
 import importlib.util as _importlib_util
 import typing as _typing
 
+from egnc import _moved
+
+_moved.install()
+
 if _typing.TYPE_CHECKING:
     from egnc.api import Result, StageReport, marginal_covariances, solve
     from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError, NumericalError, SolverError
-    from egnc.gnc import GncOptions
     from egnc.graph import PoseGraph
     from egnc.io import read_g2o, write_g2o
-    from egnc.least_squares import SolverOptions
+    from egnc.nonlinear.least_squares import SolverOptions
+    from egnc.robust.gnc import GncOptions
 
 _HOMES = {
     "EgncError": "egnc.errors",
     "EgncWarning": "egnc.errors",
     "G2oFormatError": "egnc.errors",
-    "GncOptions": "egnc.gnc",
+    "GncOptions": "egnc.robust.gnc",
     "GraphError": "egnc.errors",
     "NumericalError": "egnc.errors",
     "PoseGraph": "egnc.graph",
     "Result": "egnc.api",
     "SolverError": "egnc.errors",
-    "SolverOptions": "egnc.least_squares",
+    "SolverOptions": "egnc.nonlinear.least_squares",
     "StageReport": "egnc.api",
     "marginal_covariances": "egnc.api",
     "read_g2o": "egnc.io",

@@ -11,14 +11,28 @@ from typing import TypedDict
 
 import numpy as np
 
-from egnc.checks import check_callable, check_choice, check_instance
-from egnc.chordal import chordal_initialization
-from egnc.decision import Decision, StartContext, lower_by_more_than_rounding, truncated_cost
-from egnc.diagnostics import solve_warnings
-from egnc.elimination import elimination_decision
 from egnc.errors import EgncError, GraphError, OptionError
-from egnc.factors import BetweenFactors, from_matrices, to_matrices
-from egnc.gnc import (
+from egnc.graph import PoseGraph
+from egnc.graph.checks import check_callable, check_choice, check_instance
+from egnc.graph.health import check_representable
+from egnc.io import read_g2o
+from egnc.linalg.linear_solvers import resolve_name
+from egnc.nonlinear.chordal import chordal_initialization
+from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
+from egnc.nonlinear.initialize import initialize_poses
+from egnc.nonlinear.least_squares import (
+    NOTHING_TO_OPTIMIZE,
+    NUMERICAL_FAILURE,
+    STATUS_MESSAGES,
+    IterationCallback,
+    Problem,
+    SolverOptions,
+)
+from egnc.nonlinear.marginals import pose_covariances
+from egnc.robust.decision import Decision, StartContext, lower_by_more_than_rounding, truncated_cost
+from egnc.robust.diagnostics import solve_warnings
+from egnc.robust.elimination import elimination_decision
+from egnc.robust.gnc import (
     GncOptions,
     GncOutcome,
     StageCallback,
@@ -30,23 +44,9 @@ from egnc.gnc import (
     run_gnc,
     stage_tolerance,
 )
-from egnc.graph import PoseGraph
-from egnc.health import check_representable
-from egnc.initialize import initialize_poses
-from egnc.io import read_g2o
-from egnc.least_squares import (
-    NOTHING_TO_OPTIMIZE,
-    NUMERICAL_FAILURE,
-    STATUS_MESSAGES,
-    IterationCallback,
-    Problem,
-    SolverOptions,
-)
-from egnc.linear_solvers import resolve_name
-from egnc.marginals import pose_covariances
-from egnc.regroup import regrouped_decision, runs_start
-from egnc.schedules import GRADUATED_METHODS, METHODS, make_schedule
-from egnc.starts import all_edges_decision, chordal_decision, graduated_decision
+from egnc.robust.regroup import regrouped_decision, runs_start
+from egnc.robust.schedules import GRADUATED_METHODS, METHODS, make_schedule
+from egnc.robust.starts import all_edges_decision, chordal_decision, graduated_decision
 
 __all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
 
@@ -81,20 +81,20 @@ class Result:
             without one).
         known_inliers: `(E,)` bool, edges held quadratic (odometry by default).
         inliers: `(E,)` bool, false for the loop closures rejected as outliers: for graduated
-            methods the decision of `egnc.decision` (`r^2 > chi2.ppf(q, d)` on the least-squares
+            methods the decision of `egnc.robust.decision` (`r^2 > chi2.ppf(q, d)` on the least-squares
             map of the accepted edges, q = `GncOptions.outlier_quantile`, 0.99 by default); for
             fixed kernels the same test at their solution; all true for `"l2"`.
         initial_cost: least-squares cost `0.5 sum r^2` at the initial guess.
         cost: least-squares cost `0.5 sum r^2` at the solution, over all edges (rejected ones too).
         accepted_cost: the same over the accepted edges only.
-        truncated_cost: `egnc.decision.truncated_cost` at the solution: accepted loops pay
+        truncated_cost: `egnc.robust.decision.truncated_cost` at the solution: accepted loops pay
             `r^2 / 2`, rejected ones `chi2.ppf(q, d) / 2`; the cost by which two decisions are
             compared.
         iterations: accepted solver steps over all stages.
         stages: per-stage reports; with `GncOptions.refine`, the last one is the least-squares
             refinement on the accepted edges (its `mu` statistics are nan).
         status: termination code of the last solve (1, 2, 3 mean converged; see
-            `egnc.least_squares.STATUS_MESSAGES`).
+            `egnc.nonlinear.least_squares.STATUS_MESSAGES`).
         message: termination reason.
         time_s: wall time in seconds, from graph to result.
         timings: seconds per solver phase, summed over stages.
@@ -114,7 +114,7 @@ class Result:
         warnings: one sentence per thing the user should check before trusting the result
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
         settled: whether the kept decision's rounds reached a classification that no longer
-            changed (`egnc.decision.Decision.settled`); True where no decision was made.
+            changed (`egnc.robust.decision.Decision.settled`); True where no decision was made.
     """
 
     graph: PoseGraph
@@ -257,7 +257,7 @@ def initial_guess(graph: PoseGraph, init: str, known_inliers: np.ndarray, linear
         graph: the pose graph.
         init: `"file"`: the graph's poses (from the file; missing ones composed along a spanning
             tree when it was read). `"odometry"`: the known-inlier edges composed from the gauge
-            pose(s), ignoring the file's other poses. `"chordal"`: `egnc.chordal`, rotations by the
+            pose(s), ignoring the file's other poses. `"chordal"`: `egnc.nonlinear.chordal`, rotations by the
             chordal relaxation then translations, over every edge: independent of odometry drift,
             but it trusts every loop closure, so false loops distort it (BENCHMARKS.md).
         known_inliers: `(E,)` bool, the edges `"odometry"` composes.
@@ -315,7 +315,7 @@ def solve(
         The `Result`, whose `graph` holds the optimized poses.
 
     Raises:
-        NumericalError: the graph cannot be solved in double precision (`egnc.health`).
+        NumericalError: the graph cannot be solved in double precision (`egnc.graph.health`).
         OptionError: an argument has the wrong type or value (e.g. `GncOptions` given as
             `options`); it names the argument.
 
@@ -390,7 +390,7 @@ def solve(
         if gnc_options.chordal_start:
             trusted = ~robust | (outcome.weights >= options.trust_weight)
             best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-            # After a runs start the chordal start classifies at the runs' chordal map (egnc.starts).
+            # After a runs start the chordal start classifies at the runs' chordal map (egnc.robust.starts).
             runs_map = runs.poses if runs is not None and not bent else None
             other, reports = chordal_decision(context, best, trusted, runs_map)
             stages += reports

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from egnc.errors import EgncError
-from egnc.factors import group_of, to_matrices
 from egnc.graph import POSE_SIZE
+from egnc.nonlinear.factors import group_of, to_matrices
 
 __all__ = ["RelativePoseError", "ate", "precision_recall", "rpe", "success"]
 

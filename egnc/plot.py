@@ -28,8 +28,8 @@ from egnc.api import Result
 from egnc.errors import EgncError
 from egnc.graph import PoseGraph
 from egnc.io.atomic import atomic_binary_file
-from egnc.kernels import make_kernel
-from egnc.mu_star import mu_star
+from egnc.robust.kernels import make_kernel
+from egnc.robust.mu_star import mu_star
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

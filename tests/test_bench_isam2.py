@@ -13,7 +13,7 @@ import pytest
 from egnc import solve
 from egnc.io import read_g2o
 from egnc.metrics import ate
-from egnc.replay import replay_steps
+from egnc.online.replay import replay_steps
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,7 +38,7 @@ def test_isam2_replay_ends_at_the_least_squares_optimum(name: str, tmp_path: Pat
     assert (row["relinearize_threshold"], row["relinearize_skip"]) == (0.1, 10)
 
     graph = read_g2o(path)
-    assert row["updates"] == len(replay_steps(graph, graph.is_odometry))  # one update per new pose, as egnc.replay
+    assert row["updates"] == len(replay_steps(graph, graph.is_odometry))  # an update per new pose, as replay
     optimum = solve(graph, "l2")
     # GTSAM's factors and egnc's agree: LM from ISAM2's estimate reaches egnc's optimal cost.
     assert row["lm_cost"] == pytest.approx(optimum.cost, rel=1e-7)

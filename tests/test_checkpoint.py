@@ -14,7 +14,7 @@ import pytest
 import egnc
 from egnc.errors import EgncError
 from egnc.online import OnlineSolver
-from egnc.replay import replay
+from egnc.online.replay import replay
 
 DATA = Path(__file__).parents[1] / "datasets"
 

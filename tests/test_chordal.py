@@ -7,14 +7,14 @@ import pytest
 
 from egnc.api import solve
 from egnc.bench import add_gtsam_reference_prior
-from egnc.chordal import chordal_initialization, nearest_rotation
 from egnc.datasets import grid_world
 from egnc.errors import EgncError
-from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
 from egnc.lie import se2, se3
-from egnc.linear_solvers import cholmod_available, rslab_available
+from egnc.linalg.linear_solvers import cholmod_available, rslab_available
+from egnc.nonlinear.chordal import chordal_initialization, nearest_rotation
+from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 
 BACKENDS = [
     "scipy",

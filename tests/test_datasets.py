@@ -22,8 +22,8 @@ from egnc.datasets import (
 )
 from egnc.datasets.false_loops import FALSE_LOOP_COVARIANCE
 from egnc.errors import EgncError
-from egnc.factors import BetweenFactors, to_matrices
 from egnc.io import read_g2o, write_g2o
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "datasets"

@@ -10,11 +10,17 @@ import numpy as np
 import pytest
 
 import egnc
-import egnc.decision as decision_module
-import egnc.marginals as marginals_module
+import egnc.nonlinear.marginals as marginals_module
+import egnc.robust.decision as decision_module
 from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import (
+from egnc.graph import PoseGraph
+from egnc.io import read_irl
+from egnc.linalg.linear_solvers import cholmod_available
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.least_squares import Problem, SolverOptions, solve_least_squares
+from egnc.nonlinear.marginals import innovations, pose_covariances, relative_covariances
+from egnc.robust.decision import (
     MAX_ROUNDS,
     REUSED_DAMPING,
     ROUND_TOLERANCE,
@@ -25,14 +31,8 @@ from egnc.decision import (
     sequentially_consistent,
     truncated_cost,
 )
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import START_OPTIONS, GncOptions
-from egnc.graph import PoseGraph
-from egnc.io import read_irl
-from egnc.kernels import chi2_quantile
-from egnc.least_squares import Problem, SolverOptions, solve_least_squares
-from egnc.linear_solvers import cholmod_available
-from egnc.marginals import innovations, pose_covariances, relative_covariances
+from egnc.robust.gnc import START_OPTIONS, GncOptions
+from egnc.robust.kernels import chi2_quantile
 
 GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
 """The decision from the initial guess alone."""
@@ -243,7 +243,7 @@ def test_a_corrupted_odometry_edge_is_reported_not_hidden():
     np.testing.assert_array_equal(first.inliers, result.inliers)
     assert first.truncated_cost == pytest.approx(result.truncated_cost, rel=1e-9)
     assert result.residual_norms[k] < 1.0 and 0 < len(result.rejected_edges) < 0.1 * graph.is_loop_closure.sum()
-    # The elimination start cannot beat it and stops at its step bound (egnc.elimination).
+    # The elimination start cannot beat it and stops at its step bound (egnc.robust.elimination).
     steps = [stage.kind for stage in result.stages].count("elimination")
     assert steps <= int(2 * result.truncated_cost / chi2_quantile(0.99, 3)) + 1
     assert len(result.stages) <= 3 + 1 + 2 * MAX_ROUNDS + steps

@@ -8,12 +8,12 @@ import pytest
 from egnc.api import solve
 from egnc.bench.cases import solve_reference
 from egnc.datasets import add_false_loops, grid_world
-from egnc.elimination import STEP_BUDGET, deletion_statistics
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions
 from egnc.io import read_g2o
-from egnc.least_squares import Problem
-from egnc.marginals import innovations, relative_covariances
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.least_squares import Problem
+from egnc.nonlinear.marginals import innovations, relative_covariances
+from egnc.robust.elimination import STEP_BUDGET, deletion_statistics
+from egnc.robust.gnc import GncOptions
 
 WITHOUT_ELIMINATION = GncOptions(elimination_start=False)
 """The default before the elimination start."""

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from egnc.factors import BetweenFactors, group_of, to_matrices
 from egnc.graph import PoseGraph
+from egnc.nonlinear.factors import BetweenFactors, group_of, to_matrices
 
 
 def random_graph(dim: int, rng: np.random.Generator, num_poses: int = 6) -> PoseGraph:

@@ -13,10 +13,10 @@ import egnc.io.atomic as atomic_module
 import egnc.io.g2o as g2o_module
 from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
 from egnc.graph import PoseGraph
-from egnc.initialize import spanning_tree
 from egnc.io import read_g2o, write_g2o
 from egnc.io.numbers import is_float, is_integer, parse_floats, parse_integers
 from egnc.lie import se2
+from egnc.nonlinear.initialize import spanning_tree
 
 # From ../shared/datasets/README.md: file -> (dim, VERTEX lines, EDGE lines). kitti_00 has no
 # VERTEX line at all; its 4541 poses come from the edges.
@@ -214,7 +214,7 @@ def test_kitti_initial_guess_is_exact_along_spanning_tree(dataset_path):
     assert len(tree) == graph.num_poses - 1
     assert mismatch[tree].max() < 1e-9
     # Independent of which tree the reader chose: the exactly satisfied edges span the graph.
-    from egnc.connectivity import connected_components
+    from egnc.graph.connectivity import connected_components
 
     count, _ = connected_components(graph.num_poses, graph.edges[mismatch < 1e-9])
     assert count == 1

@@ -9,7 +9,7 @@ from scipy.stats import chi2
 from egnc.api import solve
 from egnc.datasets import add_false_loops, grid_world
 from egnc.errors import EgncError
-from egnc.gnc import (
+from egnc.robust.gnc import (
     CHAINED_STAGE_TOL,
     RESTARTED_STAGE_TOL,
     GncOptions,
@@ -17,9 +17,9 @@ from egnc.gnc import (
     known_inlier_mask,
     stage_tolerance,
 )
-from egnc.kernels import gnc_barc2
-from egnc.mu_star import mu_star
-from egnc.schedules import (
+from egnc.robust.kernels import gnc_barc2
+from egnc.robust.mu_star import mu_star
+from egnc.robust.schedules import (
     FIXED_LAST_STAGE_METHODS,
     GRADUATED_METHODS,
     METHODS,

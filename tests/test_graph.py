@@ -11,8 +11,8 @@ import pytest
 from egnc.api import solve
 from egnc.errors import G2oFormatError, GraphError, OptionError
 from egnc.graph import PoseGraph
+from egnc.graph.validity import NO_EDGES
 from egnc.io import read_g2o
-from egnc.validity import NO_EDGES
 
 
 def chain(n: int = 4, dim: int = 2) -> PoseGraph:

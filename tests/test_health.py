@@ -7,9 +7,9 @@ import pytest
 
 import egnc
 from egnc.datasets import grid_world
-from egnc.factors import to_matrices
-from egnc.health import check_representable
-from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, solve_least_squares
+from egnc.graph.health import check_representable
+from egnc.nonlinear.factors import to_matrices
+from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, solve_least_squares
 
 
 @pytest.fixture(scope="module")

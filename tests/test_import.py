@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 import egnc
-from egnc.linear_solvers import resolve_name
+from egnc.linalg.linear_solvers import resolve_name
 
 PYPROJECT = Path(__file__).parents[1] / "pyproject.toml"
 
@@ -62,7 +62,7 @@ def test_import_and_solve_with_only_numpy_and_scipy():
     run = run_without_optional(
         f"""
         import egnc
-        from egnc.linear_solvers import cholmod_available, resolve_name
+        from egnc.linalg.linear_solvers import cholmod_available, resolve_name
 
         assert not cholmod_available()
         assert resolve_name("auto") == "scipy", resolve_name("auto")
@@ -97,7 +97,7 @@ def test_auto_takes_rslab_without_scikit_sparse_and_names_the_extra_of_a_missing
         import sys
         sys.modules["sksparse"] = None
         from egnc.errors import EgncError
-        from egnc.linear_solvers import resolve_name
+        from egnc.linalg.linear_solvers import resolve_name
 
         assert resolve_name("auto") == "rslab"
         sys.modules["rslab"] = None

@@ -1,11 +1,11 @@
-"""Tests of egnc.index_sets against NumPy's own set routines."""
+"""Tests of egnc.graph.index_sets against NumPy's own set routines."""
 
 from __future__ import annotations
 
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from egnc.index_sets import sorted_unique
+from egnc.graph.index_sets import sorted_unique
 
 
 @settings(max_examples=50, deadline=None)

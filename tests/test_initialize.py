@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from egnc.connectivity import connected_components, describe_components, require_connected
 from egnc.errors import GraphError
-from egnc.initialize import compose_along_tree, initialize_poses, spanning_tree
+from egnc.graph.connectivity import connected_components, describe_components, require_connected
 from egnc.lie import se2, se3
+from egnc.nonlinear.initialize import compose_along_tree, initialize_poses, spanning_tree
 
 GROUPS = {2: (se2, se2.from_xytheta, se2.to_xytheta), 3: (se3, se3.from_xyz_quat, se3.to_xyz_quat)}
 

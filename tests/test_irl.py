@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from egnc.errors import G2oFormatError, GraphError
-from egnc.factors import BetweenFactors, to_matrices
 from egnc.io import IrlLog, read_g2o, read_irl, write_irl
 from egnc.io.irl import _quaternion_from_rzryrx, _rzryrx_from_rotation
 from egnc.lie import so3
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
 
 DATASETS = Path(__file__).parents[1] / "datasets"
 ARRAYS = ("edge_ids", "measurements", "covariances", "is_odometry", "is_outlier", "has_null")

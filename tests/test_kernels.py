@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 from scipy.stats import chi2
 
 from egnc.errors import EgncError
-from egnc.kernels import KERNELS, Kernel, gnc_barc2, make_kernel
+from egnc.robust.kernels import KERNELS, Kernel, gnc_barc2, make_kernel
 
 BARC2_3D = 0.5 * chi2.ppf(0.99, 3)
 R_GRID = np.logspace(-6, 6, 241)
@@ -469,7 +469,7 @@ def test_gnc_tls_matches_gtsam(mu):
 def test_tabulated_chi2_quantiles_are_scipys_bit_for_bit():
     from scipy.special import chdtri
 
-    from egnc.kernels import CHI2_QUANTILES, chi2_quantile
+    from egnc.robust.kernels import CHI2_QUANTILES, chi2_quantile
 
     for (quantile, d), value in CHI2_QUANTILES.items():
         assert value == float(chdtri(d, 1.0 - quantile)), (quantile, d)

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from egnc.api import solve
-from egnc.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
-from egnc.least_squares import Problem, SolverOptions, solve_least_squares
-from egnc.linear_solvers import cholmod_available, rslab_available
+from egnc.linalg.linear_solvers import cholmod_available, rslab_available
+from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
+from egnc.nonlinear.least_squares import Problem, SolverOptions, solve_least_squares
 
 BACKENDS = [
     "scipy",
@@ -75,7 +75,7 @@ def test_single_edge_solution_equals_measurement(dim):
 def dense_gauss_newton(graph: PoseGraph, iterations: int) -> np.ndarray:
     """Independent reference: GN with a dense Jacobian assembled edge by edge and np.linalg.solve."""
     factors = BetweenFactors.from_graph(graph)
-    from egnc.factors import group_of
+    from egnc.nonlinear.factors import group_of
 
     group = group_of(graph.dim)
     d = graph.tangent_dim

@@ -8,10 +8,10 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 import egnc
-import egnc.linear_solvers as linear_solvers
+import egnc.linalg.linear_solvers as linear_solvers
 from egnc.datasets import add_false_loops, grid_world
 from egnc.io import read_g2o
-from egnc.linear_solvers import (
+from egnc.linalg.linear_solvers import (
     NotPositiveDefiniteError,
     RslabSolver,
     block_order,

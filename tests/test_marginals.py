@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import egnc.marginals as marginals_module
+import egnc.nonlinear.marginals as marginals_module
 from egnc.api import solve
 from egnc.datasets import grid_world
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.least_squares import Problem
-from egnc.linear_solvers import TriangularFactor, cholmod_available, make_linear_solver, rslab_available
-from egnc.marginals import innovations, quadratic_form
+from egnc.linalg.linear_solvers import TriangularFactor, cholmod_available, make_linear_solver, rslab_available
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.least_squares import Problem
+from egnc.nonlinear.marginals import innovations, quadratic_form
 
 BACKENDS = [
     "scipy",
@@ -184,7 +184,7 @@ CHOLMOD_ONLY = pytest.mark.skipif(not cholmod_available(), reason="no scikit-spa
 
 @CHOLMOD_ONLY
 def test_the_exact_factor_pattern_is_that_of_a_dense_cholesky():
-    from egnc.linear_solvers import exact_factor_pattern
+    from egnc.linalg.linear_solvers import exact_factor_pattern
 
     rng = np.random.default_rng(7)
     for _ in range(20):
@@ -202,7 +202,7 @@ def test_the_exact_factor_pattern_is_that_of_a_dense_cholesky():
 def test_the_reach_estimate_counts_the_entries_of_an_exact_factor_of_the_system(monkeypatch):
     # Column by column, the pose-level estimate equals the exact (simplicial) factor of the
     # system itself, in the same order; the reach of a query is the same positions.
-    from egnc.linear_solvers import exact_factor_pattern
+    from egnc.linalg.linear_solvers import exact_factor_pattern
 
     monkeypatch.setattr(marginals_module, "REACH_MIN_UNKNOWNS", 0)
     graph = grid_world(2, 400, seed=3).graph

@@ -9,9 +9,9 @@ import pytest
 import scipy.optimize
 
 from egnc.errors import EgncError
-from egnc.factors import from_matrices, to_matrices
 from egnc.lie import se2, se3, so3
 from egnc.metrics import ate, precision_recall, rpe, success
+from egnc.nonlinear.factors import from_matrices, to_matrices
 
 
 def random_trajectory(dim: int, n: int, seed: int) -> np.ndarray:

@@ -18,8 +18,8 @@ import egnc
 from egnc.api import METHODS, marginal_covariances, solve
 from egnc.errors import OptionError, OptionTypeError
 from egnc.io import read_g2o, read_irl, write_g2o, write_irl
-from egnc.least_squares import NOTHING_TO_OPTIMIZE
-from egnc.linear_solvers import cholmod_available, rslab_available
+from egnc.linalg.linear_solvers import cholmod_available, rslab_available
+from egnc.nonlinear.least_squares import NOTHING_TO_OPTIMIZE
 
 GRID2D = Path(__file__).parents[1] / "datasets" / "grid2d.g2o"
 BACKENDS = [

@@ -10,8 +10,8 @@ import pytest
 from scipy.optimize import brentq
 
 from egnc.errors import EgncError
-from egnc.kernels import make_kernel
-from egnc.mu_star import _margin_and_slope, convexity_margin, mu_star
+from egnc.robust.kernels import make_kernel
+from egnc.robust.mu_star import _margin_and_slope, convexity_margin, mu_star
 
 
 def design_f(mu, r, c):

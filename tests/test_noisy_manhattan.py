@@ -10,8 +10,8 @@ import egnc
 from egnc.datasets import NoisyGraph, grid_world, make_noisy_manhattan
 from egnc.datasets.noisy_manhattan import outlier_count
 from egnc.errors import EgncError
-from egnc.factors import BetweenFactors, group_of, to_matrices
 from egnc.io import read_g2o, read_irl, write_irl
+from egnc.nonlinear.factors import BetweenFactors, group_of, to_matrices
 
 THRESHOLD = {2: chi2.ppf(0.95, 3), 3: chi2.ppf(0.95, 6)}
 

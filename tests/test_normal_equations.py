@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-import egnc.normal_equations as normal_equations_module
-from egnc.factors import Linearization
-from egnc.normal_equations import NormalEquationsPattern, edge_products
+import egnc.linalg.normal_equations as normal_equations_module
+from egnc.linalg.linearization import Linearization
+from egnc.linalg.normal_equations import NormalEquationsPattern, edge_products
 
 
 def dense_normal_equations(edges, fixed, d, lin, information, weights):

@@ -130,7 +130,7 @@ def test_online_notebook_prints_its_answer(run_notebook):
     answer = re.search(r"^EGNC: (\d+) iterations; riSAM: (\d+) iterations; ratio [\d.]+$", text, re.MULTILINE)
     assert answer, text
     assert 0 < int(answer[1]) < int(answer[2])
-    assert "egnc.replay makes the same updates and the same final decisions as the loop above" in text
+    assert "egnc.online.replay makes the same updates and the same final decisions as the loop above" in text
 
 
 def test_readme_snippet_prints_the_line_it_shows():

@@ -1,4 +1,4 @@
-"""The online solver (`egnc.online`) and the replay of whole graphs through it (`egnc.replay`)."""
+"""The online solver (`egnc.online`) and the replay of whole graphs through it (`egnc.online.replay`)."""
 
 from __future__ import annotations
 
@@ -10,20 +10,20 @@ import pytest
 from scipy.stats import chi2
 
 import egnc
-import egnc.online
+import egnc.online.solver
 from egnc.datasets import add_false_loops
-from egnc.datasets.labels import read_labels
-from egnc.decision import Decision, truncated_cost
 from egnc.errors import EgncError, GraphError, OptionError
-from egnc.factors import from_matrices, group_of, to_matrices
-from egnc.kernels import make_kernel
-from egnc.least_squares import Problem, SolverOptions, solve_least_squares
-from egnc.linear_solvers import cholmod_available
-from egnc.losses import KernelLoss
+from egnc.io.labels import read_labels
+from egnc.linalg.linear_solvers import cholmod_available
 from egnc.metrics import precision_recall
-from egnc.mu_star import mu_star
+from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
+from egnc.nonlinear.least_squares import Problem, SolverOptions, solve_least_squares
 from egnc.online import OnlineOptions, OnlineSolver
-from egnc.replay import replay, replay_steps
+from egnc.online.replay import replay, replay_steps
+from egnc.robust.decision import Decision, truncated_cost
+from egnc.robust.kernels import make_kernel
+from egnc.robust.losses import KernelLoss
+from egnc.robust.mu_star import mu_star
 
 DATA = Path(__file__).parents[1] / "datasets"
 RISAM_SEQUENCE = [0.0, 0.12, 0.384, 0.9648, 1.0]
@@ -579,7 +579,7 @@ def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
     r = factors.whitened_norms(factors.residuals(bent_T))
     bent_cost = truncated_cost(r, robust, 3, solver.gnc_options.outlier_quantile)
     monkeypatch.setattr(
-        egnc.online, "decide_outliers", lambda *args, **kwargs: Decision(bent_T, wrong, (), True, bent_cost)
+        egnc.online.solver, "decide_outliers", lambda *args, **kwargs: Decision(bent_T, wrong, (), True, bent_cost)
     )
     result = solver.result()
     assert "batch solve" in result.message and result.start in ("guess", "chordal")
@@ -599,13 +599,13 @@ def test_result_keeps_the_online_decision_where_the_batch_one_is_lower_by_roundi
     false = solver.add_loop(0, 10, [7.0, 0.0, 0.0], information)
     solver.add_loop(0, 10, [10.0, 0.0, 0.0], information)
     solver.update()
-    decide = egnc.online.decide_outliers
+    decide = egnc.online.solver.decide_outliers
 
     def a_rounding_above(*args, **kwargs):
         decision = decide(*args, **kwargs)
         return replace(decision, truncated_cost=decision.truncated_cost * (1 + 1e-12))
 
-    monkeypatch.setattr(egnc.online, "decide_outliers", a_rounding_above)
+    monkeypatch.setattr(egnc.online.solver, "decide_outliers", a_rounding_above)
     kept = solver.result()
     assert kept.start == "online" and kept.rejected_edges.tolist() == [false]
 

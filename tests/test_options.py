@@ -16,8 +16,8 @@ import pytest
 
 from egnc.api import solve
 from egnc.errors import EgncError, OptionError, OptionTypeError
-from egnc.gnc import GncOptions
-from egnc.least_squares import SolverOptions
+from egnc.nonlinear.least_squares import SolverOptions
+from egnc.robust.gnc import GncOptions
 
 GRID2D = Path(__file__).parents[1] / "datasets" / "grid2d_outliers.g2o"
 

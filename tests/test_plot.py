@@ -18,7 +18,7 @@ import pytest
 import egnc
 from egnc import plot
 from egnc.errors import EgncError
-from egnc.mu_star import mu_star
+from egnc.robust.mu_star import mu_star
 
 DATASETS = Path(__file__).parents[1] / "datasets"
 DOCS = Path(__file__).parents[1] / "docs"
@@ -206,7 +206,7 @@ def test_kernel_draws_rho_and_d2rho_per_mu(mpl):
     mus = (0.0, 0.5, 1.0)
     figure = plot.plot_kernel(c=3.0, mus=mus, r_max=8.0)
     ax_rho, ax_d2 = figure.axes
-    kernel = egnc.kernels.make_kernel("sig", c=3.0)
+    kernel = egnc.robust.kernels.make_kernel("sig", c=3.0)
     for ax, function in ((ax_rho, kernel.rho), (ax_d2, kernel.d2rho)):
         curves = [item for item in ax.lines if item.get_label().startswith("$\\mu$")]
         assert len(curves) == len(mus)

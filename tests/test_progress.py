@@ -6,7 +6,7 @@ import io
 import math
 
 from egnc.cli.progress import REFRESH_S, Progress
-from egnc.gnc import StageReport
+from egnc.robust.gnc import StageReport
 
 
 class FakeStream(io.StringIO):

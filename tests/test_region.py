@@ -1,4 +1,4 @@
-"""Local regions (`egnc.region`): neighbourhoods, the local problem, the boundary's block-Jacobi decrease."""
+"""Local regions (`egnc.online.region`): neighbourhoods, the local problem, the boundary's block-Jacobi decrease."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import egnc
-from egnc.factors import BetweenFactors, to_matrices
 from egnc.graph import PoseGraph
-from egnc.normal_equations import edge_products
-from egnc.region import LocalProblem, Neighbourhoods, block_jacobi_decrease
+from egnc.linalg.normal_equations import edge_products
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.online.region import LocalProblem, Neighbourhoods, block_jacobi_decrease
 
 DATA = Path(__file__).parents[1] / "datasets"
 

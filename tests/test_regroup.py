@@ -7,16 +7,16 @@ import numpy as np
 import egnc
 from egnc.api import solve
 from egnc.bench.cases import least_squares_optimum
-from egnc.chordal import chordal_initialization
-from egnc.connectivity import connected_components
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import Decision, StartContext, truncated_cost
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions
 from egnc.graph import PoseGraph
-from egnc.kernels import chi2_quantile
-from egnc.least_squares import SolverOptions
-from egnc.regroup import (
+from egnc.graph.connectivity import connected_components
+from egnc.nonlinear.chordal import chordal_initialization
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.least_squares import SolverOptions
+from egnc.robust.decision import Decision, StartContext, truncated_cost
+from egnc.robust.gnc import GncOptions
+from egnc.robust.kernels import chi2_quantile
+from egnc.robust.regroup import (
     MIN_RUN,
     RunsStart,
     consistent_pairs,

@@ -12,17 +12,17 @@ from egnc.api import marginal_covariances, solve
 from egnc.bench.cases import least_squares_optimum
 from egnc.cli.report import summary
 from egnc.datasets import add_false_loops, grid_world
-from egnc.decision import Decision, StartContext, truncated_cost
-from egnc.diagnostics import solve_warnings
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import START_OPTIONS, GncOptions, StageStart, run_gnc
 from egnc.graph import PoseGraph
-from egnc.initialize import initialize_poses
-from egnc.kernels import chi2_quantile
-from egnc.least_squares import Problem, SolverOptions
-from egnc.marginals import pose_covariances
-from egnc.schedules import make_schedule
-from egnc.starts import ALL_EDGES_SHARE, all_edges_decision
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.initialize import initialize_poses
+from egnc.nonlinear.least_squares import Problem, SolverOptions
+from egnc.nonlinear.marginals import pose_covariances
+from egnc.robust.decision import Decision, StartContext, truncated_cost
+from egnc.robust.diagnostics import solve_warnings
+from egnc.robust.gnc import START_OPTIONS, GncOptions, StageStart, run_gnc
+from egnc.robust.kernels import chi2_quantile
+from egnc.robust.schedules import make_schedule
+from egnc.robust.starts import ALL_EDGES_SHARE, all_edges_decision
 
 GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
 """The default before the chordal start: decide from the GNC solve of the initial guess alone."""
@@ -208,6 +208,6 @@ def test_the_all_edges_start_does_not_run_without_reason(monkeypatch):
     context, to_beat, _ = _all_edges_start(optimum, rejected_loops=1)
     assert all_edges_decision(context, to_beat, _never_called) == (None, ())
     # too many rejected loops: not even the chordal system of every edge is solved
-    monkeypatch.setattr("egnc.decision.chordal_initialization", _never_called)
+    monkeypatch.setattr("egnc.robust.decision.chordal_initialization", _never_called)
     context, many_rejected, _ = _all_edges_start(graph, rejected_loops=int(ALL_EDGES_SHARE * loops) + 1)
     assert all_edges_decision(context, many_rejected, _never_called) == (None, ())

@@ -8,11 +8,11 @@ import pytest
 from egnc.api import solve
 from egnc.datasets import add_false_loops, grid_world
 from egnc.errors import OptionError
-from egnc.factors import to_matrices
-from egnc.kernels import make_kernel
-from egnc.least_squares import Problem, SolverOptions
-from egnc.linear_solvers import cholmod_available, rslab_available
-from egnc.normal_equations import edge_products
+from egnc.linalg.linear_solvers import cholmod_available, rslab_available
+from egnc.linalg.normal_equations import edge_products
+from egnc.nonlinear.factors import to_matrices
+from egnc.nonlinear.least_squares import Problem, SolverOptions
+from egnc.robust.kernels import make_kernel
 
 BACKENDS = [
     "scipy",
@@ -76,7 +76,7 @@ def test_a_preconditioned_step_builds_no_whole_pattern_and_sums_the_same_gradien
     """CG's operator is the trusted system plus the other edges' products: the pattern of every
     edge (false loops' fill-in included) is not built, and the gradient and diagonal of `H` that
     `set_system` returns are the whole pattern's, bit for bit."""
-    import egnc.step_solver as step_solver
+    import egnc.linalg.step_solver as step_solver
 
     graph = corrupted.graph
     built = []
@@ -231,7 +231,7 @@ def test_scipy_orders_a_system_at_its_first_factorization_and_solves_it_as_if_bu
 ):
     """SuperLU's block order costs a factorization: a pattern stays in pose-row order until it is
     factorized, and its direct step then equals, bit for bit, that of the pattern built in order."""
-    import egnc.step_solver as step_solver
+    import egnc.linalg.step_solver as step_solver
 
     graph = corrupted.graph
     orders = []

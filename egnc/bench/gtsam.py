@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from egnc.errors import EgncError
-from egnc.factors import from_matrices
 from egnc.graph import PoseGraph
 from egnc.io import write_g2o
+from egnc.nonlinear.factors import from_matrices
 
 __all__ = ["GTSAM_PRIOR_SIGMA", "add_gtsam_reference_prior", "gtsam_available", "gtsam_solve"]
 

@@ -1,6 +1,6 @@
 """Method specs of the benchmark grid: `name` or `name[GncOptions field=value,...]`.
 
-Every name in `egnc.schedules.METHODS` may carry `GncOptions` overrides in brackets
+Every name in `egnc.robust.schedules.METHODS` may carry `GncOptions` overrides in brackets
 (`egnc[threshold=distance]`, `risam[c=2,refine=false]`); the GTSAM baselines (`GTSAM_METHODS`) take
 none.
 """
@@ -14,8 +14,8 @@ import typing
 from dataclasses import dataclass
 
 from egnc.errors import EgncError
-from egnc.gnc import GncOptions
-from egnc.schedules import METHODS
+from egnc.robust.gnc import GncOptions
+from egnc.robust.schedules import METHODS
 
 __all__ = ["GTSAM_METHODS", "MethodSpec", "parse_method", "parse_methods"]
 
@@ -29,7 +29,7 @@ class MethodSpec:
 
     Attributes:
         label: the spec as given, e.g. `"egnc[threshold=distance]"`; names the method in the results.
-        method: an `egnc.schedules.METHODS` name or one of `GTSAM_METHODS`.
+        method: an `egnc.robust.schedules.METHODS` name or one of `GTSAM_METHODS`.
         overrides: `GncOptions` fields to change, as `(name, value)` pairs (egnc methods only).
     """
 

@@ -22,9 +22,9 @@ from egnc.bench.cases import BenchCase
 from egnc.bench.child import Outcome
 from egnc.bench.gtsam import gtsam_solve
 from egnc.bench.methods import MethodSpec
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions, classify_inliers
 from egnc.metrics import ate, precision_recall, rpe, success
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.robust.gnc import GncOptions, classify_inliers
 
 __all__ = ["CSV_COLUMNS", "RunRecord", "describe_run", "record_run", "solve_and_score"]
 

@@ -31,7 +31,7 @@ from egnc.bench import (
 from egnc.cli.arguments import int_at_least, positive_float
 from egnc.datasets import OUTLIER_RULES, VARIANTS
 from egnc.errors import EgncError
-from egnc.linear_solvers import LINEAR_SOLVERS
+from egnc.linalg.linear_solvers import LINEAR_SOLVERS
 
 EXAMPLES = f"""examples:
   egnc-bench --datasets csail,intel --percent 10 --seeds 1 --methods egnc,risam,gnc-tls,l2

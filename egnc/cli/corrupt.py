@@ -20,7 +20,7 @@ from egnc.api import solve
 from egnc.datasets import OUTLIER_RULES, VARIANTS, add_false_loops, write_labels
 from egnc.errors import EgncError
 from egnc.io import read_g2o, write_g2o
-from egnc.linear_solvers import LINEAR_SOLVERS
+from egnc.linalg.linear_solvers import LINEAR_SOLVERS
 
 EXAMPLES = """examples:
   egnc-corrupt datasets/grid2d.g2o --percent 30 --seed 1 -o grid2d_30.g2o

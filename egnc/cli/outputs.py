@@ -15,11 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from egnc.api import Result
+from egnc.cli.edges_csv import write_edges_csv
 from egnc.errors import EgncError
 from egnc.graph import PoseGraph
 from egnc.io import write_g2o
 from egnc.io.atomic import all_or_nothing, atomic_text_file, check_writable
-from egnc.io.edges_csv import write_edges_csv
 from egnc.io.trajectory import TrajectoryFormat, trajectory_format, write_trajectory
 from egnc.plot import figure_format, plot_trajectory, save_figure
 

@@ -15,8 +15,8 @@ import math
 import time
 from typing import TextIO
 
-from egnc.gnc import StageReport
 from egnc.online import UpdateReport
+from egnc.robust.gnc import StageReport
 
 REFRESH_S = 0.1
 """Shortest interval between two rewrites of the live line, seconds."""
@@ -80,7 +80,7 @@ class Progress(_ProgressLine):
 
 
 class StepProgress(_ProgressLine):
-    """The `on_step` callback of an online replay (`egnc.replay`), writing to `stream`.
+    """The `on_step` callback of an online replay (`egnc.online.replay`), writing to `stream`.
 
     On a terminal one live line, rewritten at most `REFRESH_S` apart; in a log one line per tenth
     of the steps. Each line: steps done of all, poses and loop closures so far, loops rejected

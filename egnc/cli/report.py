@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from egnc.api import Result
-from egnc.connectivity import describe_ids
-from egnc.gnc import iteration_limited
+from egnc.graph.connectivity import describe_ids
+from egnc.robust.gnc import iteration_limited
 
 
 def report_dict(result: Result, warnings: list[str]) -> dict[str, Any]:

@@ -3,7 +3,7 @@
 The input is read as riSAM's Incremental Robot Log (`egnc.io.irl`) when its name ends in `.irl`
 or its fourth line is `nonlinear` (the IRL header), else as g2o. For an IRL log the known inliers
 are its ODOMETRY entries, and edge indices count its ODOMETRY and LOOP entries in file order.
-`--online` replays the input pose by pose through the online solver (`egnc.replay`) instead of
+`--online` replays the input pose by pose through the online solver (`egnc.online.replay`) instead of
 solving it in one batch.
 
 Exit codes: 0 success; 1 an error about the input, the solve or an output (one line on stderr,
@@ -36,16 +36,16 @@ from egnc.io import read_g2o, read_irl
 from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
 from egnc.io.trajectory import TRAJECTORY_FORMATS
-from egnc.least_squares import NUMERICAL_FAILURE, SolverOptions
-from egnc.linear_solvers import LINEAR_SOLVERS, resolve_name
+from egnc.linalg.linear_solvers import LINEAR_SOLVERS, resolve_name
+from egnc.linalg.step_solver import LINEAR_METHODS
+from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.online import ONLINE_METHODS, OnlineOptions
-from egnc.replay import CHECKPOINT_EVERY, latency_summary, replay
-from egnc.step_solver import LINEAR_METHODS
+from egnc.online.replay import CHECKPOINT_EVERY, latency_summary, replay
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in docs/cli.md)."""
 
-"""`Result.status` of a solve that produced non-finite numbers (`egnc.least_squares`)."""
+"""`Result.status` of a solve that produced non-finite numbers (`egnc.nonlinear.least_squares`)."""
 
 CHOLMOD_HINT_MIN_POSES = {2: 30_000, 3: 3_000}
 """Graph sizes (poses, by dimension) from which a SciPy-only `egnc-solve` names the `rslab` and `cholmod` extras.

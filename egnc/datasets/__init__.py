@@ -8,8 +8,8 @@ from egnc.datasets.false_loops import (
     false_loop_count,
 )
 from egnc.datasets.grid_world import GridWorld, grid_world
-from egnc.datasets.labels import read_labels, write_labels
 from egnc.datasets.noisy_manhattan import NoisyGraph, make_noisy_manhattan
+from egnc.io.labels import read_labels, write_labels
 
 __all__ = [
     "OUTLIER_RULES",

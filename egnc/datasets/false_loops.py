@@ -42,9 +42,9 @@ from typing import Literal
 import numpy as np
 
 from egnc.errors import EgncError
-from egnc.factors import group_of, to_matrices
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
-from egnc.kernels import chi2_quantile
+from egnc.nonlinear.factors import group_of, to_matrices
+from egnc.robust.kernels import chi2_quantile
 
 Variant = Literal["random", "group", "mixed", "close"]
 VARIANTS: tuple[str, ...] = ("random", "group", "mixed", "close")

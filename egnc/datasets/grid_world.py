@@ -36,8 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from egnc.errors import EgncError
-from egnc.factors import from_matrices, group_of, to_matrices
 from egnc.graph import TANGENT_SIZE, PoseGraph
+from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
 
 _MIN_SIGMA = 1e-6
 """A zero sigma makes the measurement exact; its information is capped at `1 / _MIN_SIGMA^2`."""

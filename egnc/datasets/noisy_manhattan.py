@@ -68,11 +68,11 @@ import numpy as np
 from egnc.api import solve
 from egnc.datasets.grid_world import expand_sigmas, rounded
 from egnc.errors import EgncError
-from egnc.factors import from_matrices, group_of, to_matrices
 from egnc.graph import POSE_SIZE, PoseGraph
-from egnc.initialize import initialize_poses
 from egnc.io.irl import IrlLog
-from egnc.kernels import chi2_quantile
+from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
+from egnc.nonlinear.initialize import initialize_poses
+from egnc.robust.kernels import chi2_quantile
 
 __all__ = [
     "ACCEPT_QUANTILE",

@@ -15,7 +15,7 @@ import numpy as np
 
 from egnc.errors import EgncError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE
-from egnc.index_sets import sorted_unique
+from egnc.graph.index_sets import sorted_unique
 from egnc.io.atomic import atomic_binary_file
 
 CHECKPOINT_VERSION = 1

@@ -33,7 +33,7 @@ def read_known_inliers(path: str | os.PathLike, num_edges: int) -> np.ndarray:
     text = read_text(path)
     if text.lstrip().startswith("{"):
         # Imported here: egnc.datasets loads every dataset generator, which egnc-solve rarely needs.
-        from egnc.datasets.labels import read_labels
+        from egnc.io.labels import read_labels
 
         is_outlier, _ = read_labels(path)
         if len(is_outlier) != num_edges:

@@ -21,7 +21,7 @@ wrapped and quaternions are not normalized (that happens when converting to matr
 
 Reading validates everything before building arrays, so a bad file gives a one-line
 `G2oFormatError` naming the file and 1-based line, never a NumPy traceback. Poses without a VERTEX
-line get their initial guess from `egnc.initialize`.
+line get their initial guess from `egnc.nonlinear.initialize`.
 """
 
 from __future__ import annotations
@@ -37,24 +37,24 @@ from typing import NoReturn
 
 import numpy as np
 
-from egnc.checks import check_bool, check_choice, check_instance
-from egnc.connectivity import describe_ids, hold_isolated_fixed, isolated_vertices, require_connected
 from egnc.errors import EgncWarning, G2oFormatError, GraphError, OptionError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
-from egnc.index_sets import sorted_unique
-from egnc.initialize import initialize_poses
-from egnc.io.atomic import atomic_text_file
-from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
-from egnc.io.numbers import check_line_characters, is_float, parse_floats, parse_id, parse_integers, shown
-from egnc.io.plain_records import plain_records
-from egnc.io.text import read_text
-from egnc.validity import (
+from egnc.graph.checks import check_bool, check_choice, check_instance
+from egnc.graph.connectivity import describe_ids, hold_isolated_fixed, isolated_vertices, require_connected
+from egnc.graph.index_sets import sorted_unique
+from egnc.graph.validity import (
     NO_EDGES,
     first_bad_quaternion,
     first_self_edge,
     not_positive_definite,
     not_positive_definite_message,
 )
+from egnc.io.atomic import atomic_text_file
+from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
+from egnc.io.numbers import check_line_characters, is_float, parse_floats, parse_id, parse_integers, shown
+from egnc.io.plain_records import plain_records
+from egnc.io.text import read_text
+from egnc.nonlinear.initialize import initialize_poses
 
 
 @dataclass(frozen=True)
@@ -166,7 +166,7 @@ def read_g2o(
 
     Returns:
         The graph, vertex ids sorted ascending, edges in file order. Vertices referenced by edges
-        but without a VERTEX line get their pose from `egnc.initialize.initialize_poses`.
+        but without a VERTEX line get their pose from `egnc.nonlinear.initialize.initialize_poses`.
         Vertices that no edge touches are held fixed (see `hold_isolated_fixed`).
 
     Warns:
@@ -457,7 +457,7 @@ def _check_finite(table: _Table, tag: _Tag, context: _Context) -> None:
 
 
 def _check_quaternions(quaternions: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject quaternions that cannot be normalized (`egnc.validity`); stored values are kept as read."""
+    """Reject quaternions that cannot be normalized (`egnc.graph.validity`); stored values are kept as read."""
     found = first_bad_quaternion(quaternions)
     if found:
         raise context.error(found[1], int(lines[found[0]]))
@@ -479,7 +479,7 @@ def _check_unique_vertices(vertex_ids: np.ndarray, lines: np.ndarray, context: _
 
 
 def _check_no_self_edges(edge_ids: np.ndarray, lines: np.ndarray, context: _Context) -> None:
-    """Reject an edge from a vertex to itself (`egnc.validity`)."""
+    """Reject an edge from a vertex to itself (`egnc.graph.validity`)."""
     found = first_self_edge(edge_ids)
     if found:
         raise context.error(found[1], int(lines[found[0]]))

@@ -18,7 +18,7 @@ from typing import Literal
 
 import numpy as np
 
-from egnc.validity import not_positive_definite
+from egnc.graph.validity import not_positive_definite
 
 InformationMode = Literal["strict", "nearest-pd", "diagonal"]
 INFORMATION_MODES: tuple[InformationMode, ...] = ("strict", "nearest-pd", "diagonal")
@@ -49,7 +49,7 @@ def repair_information(
 
     Args:
         information: `(E, d, d)` symmetric matrices, finite.
-        bad: indices from `egnc.validity.not_positive_definite` (non-empty).
+        bad: indices from `egnc.graph.validity.not_positive_definite` (non-empty).
         mode: `"nearest-pd"` or `"diagonal"` (see the module docstring).
 
     Returns:

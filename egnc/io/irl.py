@@ -52,17 +52,17 @@ from pathlib import Path
 
 import numpy as np
 
-from egnc.checks import check_instance
-from egnc.connectivity import connected_components, describe_components, require_connected
 from egnc.errors import EgncError, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
-from egnc.index_sets import sorted_unique
-from egnc.initialize import initialize_poses
+from egnc.graph.checks import check_instance
+from egnc.graph.connectivity import connected_components, describe_components, require_connected
+from egnc.graph.index_sets import sorted_unique
+from egnc.graph.validity import not_positive_definite
 from egnc.io.atomic import atomic_text_file
 from egnc.io.numbers import check_line_characters, format_floats, is_float, parse_id, shown
 from egnc.io.text import read_text
 from egnc.lie import so3
-from egnc.validity import not_positive_definite
+from egnc.nonlinear.initialize import initialize_poses
 
 __all__ = ["IrlLog", "IrlPrior", "read_irl", "write_irl"]
 

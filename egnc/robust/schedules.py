@@ -37,9 +37,9 @@ from typing import Literal, Protocol
 import numpy as np
 
 from egnc.errors import EgncError
-from egnc.kernels import Kernel, chi2_quantile, gnc_barc2, make_kernel
-from egnc.losses import FixedWeightLoss, KernelLoss
-from egnc.mu_star import mu_star
+from egnc.robust.kernels import Kernel, chi2_quantile, gnc_barc2, make_kernel
+from egnc.robust.losses import FixedWeightLoss, KernelLoss
+from egnc.robust.mu_star import mu_star
 
 METHODS = ("egnc", "risam", "gnc-gm", "gnc-tls", "huber", "cauchy", "gm", "l2")
 """Every method name `egnc.solve` and `egnc-solve --method` accept."""

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from egnc.checks import check_int, describe
 from egnc.errors import GraphError, OptionError
-from egnc.validity import (
+from egnc.graph.checks import check_int, describe
+from egnc.graph.validity import (
     NO_EDGES,
     first_bad_quaternion,
     first_self_edge,
@@ -101,7 +101,7 @@ class PoseGraph:
             parameters, ...), verbatim, kept by `read_g2o(skip_unknown=True)` so that
             `write_g2o` writes them back.
 
-    The constructor checks what the readers check (`egnc.validity`, same wording, naming the edge
+    The constructor checks what the readers check (`egnc.graph.validity`, same wording, naming the edge
     index): at least one edge, no edge from a vertex to itself, positive-definite information,
     normalizable measurement quaternions; and unique sorted ids, shapes, edge rows in range. It
     raises `GraphError`. The arrays are read-only views of private copies, so neither the
@@ -150,7 +150,7 @@ class PoseGraph:
         object.__setattr__(self, "unknown_lines", tuple(map(str, self.unknown_lines)))
 
     def _check_edges(self, new: set[str]) -> None:
-        """The reader's checks (`egnc.validity`), on the arrays not already checked by another graph."""
+        """The reader's checks (`egnc.graph.validity`), on the arrays not already checked by another graph."""
         if not self.num_edges:
             raise GraphError(f"no edges: {NO_EDGES}")
         if "vertex_ids" in new and np.any(np.diff(self.vertex_ids) <= 0):

@@ -45,11 +45,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from egnc.factors import BetweenFactors, group_of
-from egnc.least_squares import Problem
-from egnc.linear_solvers import Factorization
-from egnc.marginals import transposed_jacobians
-from egnc.normal_equations import NormalEquationsPattern, edge_products
+from egnc.linalg.linear_solvers import Factorization
+from egnc.linalg.normal_equations import NormalEquationsPattern, edge_products
+from egnc.nonlinear.factors import BetweenFactors, group_of
+from egnc.nonlinear.least_squares import Problem
+from egnc.nonlinear.marginals import transposed_jacobians
 
 __all__ = ["ConvergedMap", "FirstStage"]
 

@@ -5,24 +5,24 @@ Where the map is weakly constrained (long odometry chains, few loop closures: MI
 map to fit it (a false MIT loop ends at `r^2 = 0.08`), so every loop passes the chi-square test;
 the robust stage from a poor guess instead lets honest loops go that the guess does not fit
 (13 of MIT's 20 with 2 false loops added), and the decision rounds cannot bring them back,
-because the map without them is too weak to vouch for them (`egnc.decision`). Neither the guess
-nor the chordal start (`egnc.starts`) reaches the map of the honest loops.
+because the map without them is too weak to vouch for them (`egnc.robust.decision`). Neither the guess
+nor the chordal start (`egnc.robust.starts`) reaches the map of the honest loops.
 
 What sees such a loop is its deletion statistic: the innovation of its measurement against the
 map of every other edge. At a least-squares solution that includes the loop it is
 `e^T (Omega^-1 - C)^-1 e`, with `e` its residual and `C = A H^-1 A^T` the covariance of the
-residual the map predicts (`egnc.marginals.relative_covariances`; in regression terms the
+residual the map predicts (`egnc.nonlinear.marginals.relative_covariances`; in regression terms the
 externally studentized residual). It is never smaller than `r^2`, it is chi-square with `d`
 degrees of freedom for an honest loop of a linear model, and it is large for a loop that the
 map can only fit because the loop bends it (MIT: 208 and 146 for the two false loops).
 
-From the chordal initialization of every edge (`egnc.chordal`), the start:
+From the chordal initialization of every edge (`egnc.nonlinear.chordal`), the start:
 
 1. solves least squares over the accepted edges (every edge at first);
 2. computes the deletion statistic of every accepted loop and, if the largest exceeds
    `chi2.ppf(q, d)`, rejects that loop alone and returns to 1: one false loop inflates the
    statistics of the honest loops it bends, so they are judged again without it;
-3. decides from that classification (`egnc.decision.decide_outliers`, with re-admission).
+3. decides from that classification (`egnc.robust.decision.decide_outliers`, with re-admission).
 
 The caller keeps the result only where its truncated cost is lower than the other starts'.
 
@@ -51,14 +51,14 @@ import time
 
 import numpy as np
 
-from egnc.decision import Decision, StartContext, least_squares_report, map_credit, readmit_quantile
-from egnc.factors import BetweenFactors
-from egnc.gnc import GncOptions, StageReport
 from egnc.graph import PoseGraph
-from egnc.kernels import chi2_quantile
-from egnc.least_squares import NUMERICAL_FAILURE, Problem, solve_least_squares
-from egnc.linear_solvers import NotPositiveDefiniteError
-from egnc.marginals import relative_covariances
+from egnc.linalg.linear_solvers import NotPositiveDefiniteError
+from egnc.nonlinear.factors import BetweenFactors
+from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, Problem, solve_least_squares
+from egnc.nonlinear.marginals import relative_covariances
+from egnc.robust.decision import Decision, StartContext, least_squares_report, map_credit, readmit_quantile
+from egnc.robust.gnc import GncOptions, StageReport
+from egnc.robust.kernels import chi2_quantile
 
 STEP_BUDGET = 4096
 """Largest (loop closures x possible elimination steps) for which the start runs: each step
@@ -102,7 +102,7 @@ def undecided(
     Such a loop agrees with the decision's map (innovation statistic at most
     `chi2.ppf(readmit_quantile, d)`) only because the map does not determine its relative pose:
     with the map credited no more uncertainty of it than the loop's own
-    (`egnc.decision.map_credit`), the statistic exceeds that threshold. The map is too weak to
+    (`egnc.robust.decision.map_credit`), the statistic exceeds that threshold. The map is too weak to
     judge it.
     """
     rejected = np.flatnonzero(robust & ~decision.inliers)

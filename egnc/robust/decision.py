@@ -11,7 +11,7 @@ So the decision is made on least-squares maps instead, in rounds:
 2. An accepted loop closure whose squared whitened residual `r^2` exceeds `chi2.ppf(q, d)` is
    rejected: it disagrees with the map even though it helped shape it.
 3. Rejected loop closures are re-admitted by their innovation statistic
-   `e^T (Omega^-1 + A H^-1 A^T)^-1 e` (`egnc.marginals`; `H` factorized by step 1's last step,
+   `e^T (Omega^-1 + A H^-1 A^T)^-1 e` (`egnc.nonlinear.marginals`; `H` factorized by step 1's last step,
    `round_information`): how well the map built without them
    predicts their measurements, within the combined uncertainty of both (the residual alone,
    `r^2`, ignores how uncertain the relative pose of two far-apart poses is). If the map agrees
@@ -86,14 +86,13 @@ from functools import cached_property
 
 import numpy as np
 
-from egnc.chordal import chordal_initialization
-from egnc.connectivity import connected_components
 from egnc.errors import SolverError
-from egnc.factors import BetweenFactors, to_matrices
-from egnc.gnc import GncOptions, StageCallback, StageKind, StageReport, StageStart, classify_inliers
 from egnc.graph import PoseGraph
-from egnc.kernels import chi2_quantile
-from egnc.least_squares import (
+from egnc.graph.connectivity import connected_components
+from egnc.linalg.linear_solvers import Factorization, NotPositiveDefiniteError
+from egnc.nonlinear.chordal import chordal_initialization
+from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.least_squares import (
     NUMERICAL_FAILURE,
     IterationCallback,
     Problem,
@@ -101,9 +100,10 @@ from egnc.least_squares import (
     SolverResult,
     solve_least_squares,
 )
-from egnc.linear_solvers import Factorization, NotPositiveDefiniteError
-from egnc.losses import FixedWeightLoss
-from egnc.marginals import ReachEstimate, covariance_solver, innovations
+from egnc.nonlinear.marginals import ReachEstimate, covariance_solver, innovations
+from egnc.robust.gnc import GncOptions, StageCallback, StageKind, StageReport, StageStart, classify_inliers
+from egnc.robust.kernels import chi2_quantile
+from egnc.robust.losses import FixedWeightLoss
 
 MAX_ROUNDS = 5
 """Refine-and-decide rounds before the classification is taken as it stands."""
@@ -193,7 +193,7 @@ def readmitted(
             of its pattern left out, `RoundProblem`); None: 1.
         estimate: `ReachEstimate.of(problem)` (`RoundProblem.reach_estimate`: it depends on the
             pattern only), or None for none: the factor may then be exported for any large
-            system (`egnc.marginals.quadratic_form`).
+            system (`egnc.nonlinear.marginals.quadratic_form`).
     """
     threshold = chi2_quantile(quantile, factors.information.shape[-1])
     # The innovation statistic is at most r^2 (its covariance adds the map's to the loop's own):
@@ -281,7 +281,7 @@ def _batch_innovations(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Innovations `(K, d)`, their covariance `(K d, K d)` and the loops' own covariances `(K, d, d)`,
     in edge order; `covariance`: the information's factorization and `ReachEstimate`; `export`:
-    whether the query may export the factor (`egnc.marginals.quadratic_form`)."""
+    whether the query may export the factor (`egnc.nonlinear.marginals.quadratic_form`)."""
     loops = factors.subset(np.sort(batch))
     e, S = innovations(problem, poses, loops, *covariance, export=export)
     return e, S, np.linalg.inv(loops.information)
@@ -337,7 +337,7 @@ def _any_passes_alone(
 
     A loop's block of `credited_covariance` depends on that loop only, so this is the statistic
     `sequentially_consistent` tests it by while nothing of its batch is admitted, in any batch.
-    The query does not export the factor (`egnc.marginals.quadratic_form`; it uses one already
+    The query does not export the factor (`egnc.nonlinear.marginals.quadratic_form`; it uses one already
     exported): where the batch is then skipped nothing else would use it, and on the 3D grids the
     copy set the robust solve's peak memory (BENCHMARKS.md, issue 18, twenty-second session).
     """
@@ -365,7 +365,7 @@ def sequentially_consistent(e: np.ndarray, S: np.ndarray, threshold: float) -> n
 
     Args:
         e: `(K, d)` residuals of the candidate loops.
-        S: `(K d, K d)` their joint innovation covariance (`egnc.marginals.innovations`).
+        S: `(K d, K d)` their joint innovation covariance (`egnc.nonlinear.marginals.innovations`).
         threshold: chi-square quantile for `d` degrees of freedom.
     """
     num_loops, d = e.shape
@@ -401,7 +401,7 @@ class RoundProblem:
     @cached_property
     def reach_estimate(self) -> ReachEstimate | None:
         """`ReachEstimate.of(problem)`: whether exporting the information's factor can pay for
-        re-admission's queries (`egnc.marginals`), computed once for every round on this problem."""
+        re-admission's queries (`egnc.nonlinear.marginals`), computed once for every round on this problem."""
         return ReachEstimate.of(self.problem)
 
     @classmethod
@@ -650,8 +650,8 @@ def decide_outliers(
 
 @dataclass(frozen=True, eq=False)
 class StartContext:
-    """What every further start of the batch decision works on (`egnc.starts`, `egnc.regroup`,
-    `egnc.elimination`): each tries to beat the best decision so far from poses of its own.
+    """What every further start of the batch decision works on (`egnc.robust.starts`, `egnc.robust.regroup`,
+    `egnc.robust.elimination`): each tries to beat the best decision so far from poses of its own.
 
     Attributes:
         graph: the pose graph.

@@ -5,16 +5,16 @@ closures come in runs: loops `(a, b)` and `(a', b')` with `|a - a'|` and `|b - b
 poses. False loops drawn at random do not. When the GNC stage starts from a guess that has
 drifted far, it can switch off a whole run of true loops where the drift is largest; the map then
 tears there, both sides fit their own loops, and each loop of the run, tested alone against the
-torn map, fails: no round of `egnc.decision` brings one back, since it would need the others
+torn map, fails: no round of `egnc.robust.decision` brings one back, since it would need the others
 (a 100 000-pose grid with 30 % false loops: 830 true loops rejected, 721 of them in runs).
 
 Loops are linked into a run when both their ends are within `RUN_WINDOW` poses and they agree
 with each other through the map between their ends (`consistent_pairs`: a chi-square test of
 the cycle the two loops close, at `GncOptions.readmit_quantile`). This start puts every run of at
 least `MIN_RUN` rejected loops back at once, solves the chordal
-initialization (`egnc.chordal`) over the accepted edges and those runs, which closes the tear
+initialization (`egnc.nonlinear.chordal`) over the accepted edges and those runs, which closes the tear
 without reading the torn map, classifies every loop there and decides from that classification
-(`egnc.decision.decide_outliers`). The caller keeps the result only where its truncated cost is
+(`egnc.robust.decision.decide_outliers`). The caller keeps the result only where its truncated cost is
 lower. It costs one chordal solve and the decision rounds, and runs only where rejected runs
 exist; a run of false loops (riSAM's "group" variant) bends the chordal map and loses the
 comparison.
@@ -43,11 +43,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from egnc.connectivity import connected_components
-from egnc.decision import Decision, StartContext, readmit_quantile
-from egnc.factors import BetweenFactors, group_of
-from egnc.gnc import StageReport, classify_inliers
-from egnc.kernels import chi2_quantile
+from egnc.graph.connectivity import connected_components
+from egnc.nonlinear.factors import BetweenFactors, group_of
+from egnc.robust.decision import Decision, StartContext, readmit_quantile
+from egnc.robust.gnc import StageReport, classify_inliers
+from egnc.robust.kernels import chi2_quantile
 
 RUN_WINDOW = 10
 """Two loops belong to one run when both their ends are at most this many poses (rows) apart."""
@@ -125,7 +125,7 @@ def loop_runs(loops: BetweenFactors, poses: np.ndarray, threshold: float, window
 def _runs_at(context: StartContext, loops: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`(labels, in_run)`, both `(K,)`, of the loop closures `loops` (edge indices) at `poses` `(N, n, n)`.
 
-    `labels` are their runs (`loop_runs` at re-admission's quantile, `egnc.decision.readmit_quantile`);
+    `labels` are their runs (`loop_runs` at re-admission's quantile, `egnc.robust.decision.readmit_quantile`);
     `in_run` is true where a loop's run has at least `MIN_RUN` loops.
     """
     quantile = readmit_quantile(context.gnc_options, context.robust)

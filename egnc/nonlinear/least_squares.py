@@ -1,7 +1,7 @@
 """Sparse Gauss-Newton and Levenberg-Marquardt on pose graphs, with IRLS edge weights.
 
-Each iteration linearizes every edge (`egnc.factors`), assembles the normal equations with a
-fixed pattern (`egnc.normal_equations`), solves them with a sparse Cholesky (`egnc.linear_solvers`)
+Each iteration linearizes every edge (`egnc.nonlinear.factors`), assembles the normal equations with a
+fixed pattern (`egnc.linalg.normal_equations`), solves them with a sparse Cholesky (`egnc.linalg.linear_solvers`)
 and retracts the step onto the poses (`X <- X Exp(delta)`). Poses marked fixed, or pose 0 when
 none is, are held constant: this removes the gauge freedom.
 
@@ -39,13 +39,13 @@ from typing import Literal, Protocol
 
 import numpy as np
 
-from egnc.checks import check_choice, check_float, check_int
 from egnc.errors import SolverError
-from egnc.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.graph import PoseGraph
-from egnc.linear_solvers import LinearSolver, NotPositiveDefiniteError, resolve_name
-from egnc.normal_equations import NormalEquationsPattern, edge_products
-from egnc.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, WholeSystem, dot
+from egnc.graph.checks import check_choice, check_float, check_int
+from egnc.linalg.linear_solvers import LinearSolver, NotPositiveDefiniteError, resolve_name
+from egnc.linalg.normal_equations import NormalEquationsPattern, edge_products
+from egnc.linalg.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, WholeSystem, dot
+from egnc.nonlinear.factors import BetweenFactors, EdgeErrors, group_of
 
 STATUS_MESSAGES = {
     0: "maximum number of iterations reached",
@@ -57,7 +57,7 @@ STATUS_MESSAGES = {
     6: "nothing to optimize: every pose is fixed",
 }
 NUMERICAL_FAILURE = 5
-"""Status of a solve stopped by non-finite numbers (`egnc.health` refuses most such inputs earlier)."""
+"""Status of a solve stopped by non-finite numbers (`egnc.graph.health` refuses most such inputs earlier)."""
 NOTHING_TO_OPTIMIZE = 6
 """Status of `egnc.solve` on a graph whose poses are all fixed: it is returned unchanged."""
 CONVERGED = (1, 2, 3)
@@ -104,7 +104,7 @@ class SolverOptions:
         initial_damping: LM's starting `lambda` (Ceres: 1 / initial trust-region radius 1e4), in
             `(0, max_damping]`.
         max_damping: LM gives up (status 4) when `lambda` exceeds this; positive and finite.
-        linear_method: how each step's linear system is solved (`egnc.step_solver`): `"auto"`
+        linear_method: how each step's linear system is solved (`egnc.linalg.step_solver`): `"auto"`
             (conjugate gradients preconditioned by the Cholesky factorization of the edges
             whose weight is at least `trust_weight`, when some edge is below it; else direct)
             or `"direct"` (one factorization of every edge).
@@ -125,7 +125,7 @@ class SolverOptions:
     trust_weight: float = 1e-4
 
     def __post_init__(self) -> None:
-        """Check every field's type and range (`egnc.checks`), storing plain Python values."""
+        """Check every field's type and range (`egnc.graph.checks`), storing plain Python values."""
         max_damping = check_float("SolverOptions.max_damping", self.max_damping, 0.0, open_low=True)
         checked: dict[str, object] = {
             "max_damping": max_damping,
@@ -162,7 +162,7 @@ class SolverResult:
             `"assemble"`, `"factorize"` (factorizations and the linear solves, CG included)
             and `"update"` (retraction, residuals and cost at the trial poses; an accepted
             step's residuals are reused).
-        linear: direct solves, CG solves and iterations, CG fallbacks (`egnc.step_solver`).
+        linear: direct solves, CG solves and iterations, CG fallbacks (`egnc.linalg.step_solver`).
         step_damping: the LM damping `lambda` (relative to `H`'s diagonal) of the last accepted
             step; 0 for Gauss-Newton and when no step was accepted.
         next_damping: the LM damping the solve would try next: as `initial_damping`, a solve
@@ -202,9 +202,9 @@ class Problem:
     Attributes:
         factors: the factors of every edge.
         fixed: `(N,)` bool, the poses without unknowns (pose 0 when the graph fixed none).
-        system: the normal equations of every edge (`egnc.step_solver.WholeSystem`): the layout
+        system: the normal equations of every edge (`egnc.linalg.step_solver.WholeSystem`): the layout
             of the unknowns, and the pattern and direct solver, built at first use.
-        step_solver: the step solver over `system` (`egnc.step_solver`).
+        step_solver: the step solver over `system` (`egnc.linalg.step_solver`).
     """
 
     factors: BetweenFactors
@@ -313,7 +313,7 @@ def solve_least_squares(
         options: solver options.
         on_iteration: called with `(iterations, cost)` after each accepted step.
         trusted: `(E,)` bool, the edges of the CG preconditioner for every linearization of this
-            solve (`egnc.step_solver`); default: those whose weight is at least
+            solve (`egnc.linalg.step_solver`); default: those whose weight is at least
             `options.trust_weight` at each linearization.
         errors: `problem.factors.evaluate(initial_poses)` if already computed (at these very
             poses, e.g. the `errors` of a solve that ended there), to reuse.

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from egnc.factors import Linearization
-from egnc.index_sets import sorted_unique
+from egnc.graph.index_sets import sorted_unique
+from egnc.linalg.linearization import Linearization
 
 PRODUCTS_CHUNK = 8192
 """Edges whose normal-equation products `edge_products` computes at once."""

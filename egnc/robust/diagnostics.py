@@ -10,10 +10,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from egnc.gnc import StageReport, iteration_limited
 from egnc.graph import PoseGraph
-from egnc.kernels import chi2_quantile
 from egnc.metrics import ate
+from egnc.robust.gnc import StageReport, iteration_limited
+from egnc.robust.kernels import chi2_quantile
 
 MOVED_FRACTION = 0.05
 """A result "far" from a consistent initial guess: ATE above this fraction of the trajectory's extent."""
@@ -48,11 +48,11 @@ def solve_warnings(
         initial_r, final_r: `(E,)` whitened residual norms at the initial guess and the result.
         initial_fits: `(E,)` bool, edges that pass the outlier test at the initial guess.
         result_poses: `(N, P)` optimized poses in the graph's parametrization.
-        start: the start whose decision was kept (only its stages count: `egnc.gnc.iteration_limited`).
+        start: the start whose decision was kept (only its stages count: `egnc.robust.gnc.iteration_limited`).
         settled: whether the outlier decision reached a classification its own map confirms
-            (`egnc.decision.Decision.settled`).
+            (`egnc.robust.decision.Decision.settled`).
         disputed: `(E,)` bool, loops the kept decision rejects and another start's decision
-            accepted (`egnc.starts`, `egnc.elimination`); None when only one start decided.
+            accepted (`egnc.robust.starts`, `egnc.robust.elimination`); None when only one start decided.
     """
     warnings = [
         f"stage {k} stopped at its iteration limit ({stages[k - 1].iterations} iterations): the result may not"

@@ -28,13 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from egnc.api import Result
-from egnc.checks import check_callable, check_instance, check_int
 from egnc.errors import EgncError, GraphError
-from egnc.gnc import GncOptions, known_inlier_mask
 from egnc.graph import PoseGraph
+from egnc.graph.checks import check_callable, check_instance, check_int
 from egnc.io.atomic import check_writable
-from egnc.least_squares import SolverOptions
+from egnc.nonlinear.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
+from egnc.robust.gnc import GncOptions, known_inlier_mask
 
 __all__ = ["CHECKPOINT_EVERY", "ReplayOutcome", "add_gauge", "add_step", "latency_summary", "replay", "replay_steps"]
 

@@ -36,7 +36,7 @@ orders the scalar matrix itself.
 
 A factorization solves (`Factorization.__call__`) and, for `cholmod` and `scipy`, exposes its
 factor as sparse arrays (`Factorization.triangular`, a `TriangularFactor`), which
-`egnc.marginals` uses to solve only the part of a triangular system a few columns reach.
+`egnc.nonlinear.marginals` uses to solve only the part of a triangular system a few columns reach.
 """
 
 from __future__ import annotations
@@ -56,9 +56,9 @@ from typing import Any, Literal, Protocol
 import numpy as np
 import scipy.sparse as sp
 
-from egnc.checks import check_instance
 from egnc.errors import EgncError, SolverError
-from egnc.index_sets import sorted_unique
+from egnc.graph.checks import check_instance
+from egnc.graph.index_sets import sorted_unique
 
 LinearSolverName = Literal["auto", "cholmod", "rslab", "scipy"]
 LINEAR_SOLVERS = ("auto", "cholmod", "rslab", "scipy")

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from egnc.factors import BetweenFactors
-from egnc.index_sets import sorted_unique
-from egnc.least_squares import Problem
-from egnc.normal_equations import edge_products
+from egnc.graph.index_sets import sorted_unique
+from egnc.linalg.normal_equations import edge_products
+from egnc.nonlinear.factors import BetweenFactors
+from egnc.nonlinear.least_squares import Problem
 
 __all__ = ["LocalProblem", "Neighbourhoods", "block_jacobi_decrease"]
 
@@ -132,7 +132,7 @@ class LocalProblem:
         rows: `(M,)` sorted pose rows of the whole graph in the local problem (free and boundary).
         free: `(M,)` bool, which of `rows` the solve moves.
         edges: `(K,)` sorted indices of the whole graph's edges in it.
-        problem: the `egnc.least_squares.Problem` over them, local rows and edges.
+        problem: the `egnc.nonlinear.least_squares.Problem` over them, local rows and edges.
     """
 
     rows: np.ndarray
@@ -156,7 +156,7 @@ class LocalProblem:
             neighbourhoods: of the whole graph's edges.
             factors: the whole graph's factors.
             held: a row held fixed even inside the region (the gauge), or -1.
-            linear_solver: backend name (`egnc.linear_solvers`).
+            linear_solver: backend name (`egnc.linalg.linear_solvers`).
         """
         edges = neighbourhoods.edges_of(region)
         rows = sorted_unique(factors.edges[edges].ravel())

@@ -8,7 +8,7 @@ For a loop closure `(i, j)` that is *not* in `H`, its residual `e` predicted by 
 graph has covariance `S = Omega^-1 + A H^-1 A^T`, with `A = [J_e_xi | J_e_xj]` the residual's
 Jacobian. Then `e^T S^-1 e` (the innovation statistic) is chi-square with `d` degrees of freedom
 when the loop agrees with the map; for a linear model it is also twice the least-squares cost the
-loop would add. This is the re-admission test of `egnc.gnc`.
+loop would add. This is the re-admission test of `egnc.robust.gnc`.
 
 Every query needs `A H^-1 A^T`, a `d x d` block: it is read off `H^-1 B` for a right-hand side `B`
 holding `A^T` in the rows of the two poses, solved for many queries at once with one
@@ -20,7 +20,7 @@ The joint covariance of a few queries (`innovations`) needs less: with `H = P^T 
 `B^T H^-1 B = W^T D^-1 W` for `W = L^-1 P B`, and `W` is zero outside the *reach* of `B`'s rows,
 the positions whose elimination depends on them (their ancestors in the elimination tree). So
 `W` is solved with the columns of `L` on that reach only, where the backend exposes its factor
-(`egnc.linear_solvers.TriangularFactor`): on a 100 000-pose 2D grid a 64-loop batch's reach is
+(`egnc.linalg.linear_solvers.TriangularFactor`): on a 100 000-pose 2D grid a 64-loop batch's reach is
 7 % of the unknowns and 31 % of `L`'s entries (BENCHMARKS.md, issue 18). The reach's columns are
 taken in dense panels, one per run of columns that share their rows below (a supernode of `L`):
 each panel is a dense triangular solve and a matrix product on all right-hand sides at once.
@@ -38,10 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from egnc.factors import BetweenFactors
-from egnc.least_squares import Problem
-from egnc.linear_solvers import Factorization, TriangularFactor, exact_factor_pattern, serial_native_threads
-from egnc.normal_equations import NormalEquationsPattern
+from egnc.linalg.linear_solvers import Factorization, TriangularFactor, exact_factor_pattern, serial_native_threads
+from egnc.linalg.normal_equations import NormalEquationsPattern
+from egnc.nonlinear.factors import BetweenFactors
+from egnc.nonlinear.least_squares import Problem
 
 _MAX_RHS_VALUES = 2**24
 """Largest `n x columns` right-hand side solved at once (128 MiB of float64)."""
@@ -306,7 +306,7 @@ def _reach_solve(factor: TriangularFactor, B: sp.csc_matrix) -> tuple[np.ndarray
     if not worth_it(reach):  # nor is the factor's whole reach, which holds this one
         return None
     rhs = sp.csc_matrix((B.data, rows, B.indptr), shape=(n, B.shape[1]))
-    with serial_native_threads():  # BLAS calls on small panels: one thread (egnc.linear_solvers)
+    with serial_native_threads():  # BLAS calls on small panels: one thread (egnc.linalg.linear_solvers)
         solved = _forward_solve_on(lower, reach, rhs)
         if solved is None:  # a factor whose columns reach past their tree ancestors
             reach = _ancestors(lower, sources)

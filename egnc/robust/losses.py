@@ -1,6 +1,6 @@
 """Per-edge losses handed to the IRLS solver: which edges are robust, with which kernel and `mu`.
 
-Both classes implement `egnc.least_squares.EdgeLoss` (`cost(r)` and `weight(r)` over all edges).
+Both classes implement `egnc.nonlinear.least_squares.EdgeLoss` (`cost(r)` and `weight(r)` over all edges).
 Known inliers (odometry, priors) always keep the quadratic `0.5 r^2` and weight 1.
 """
 
@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from egnc.kernels import Kernel
+from egnc.robust.kernels import Kernel
 
 
 @dataclass(frozen=True, eq=False)

@@ -3,17 +3,17 @@
 The GNC stage starts from the initial guess. When that guess has drifted far (odometry chained
 over thousands of poses, a noisy heading), its robust optimum can settle in a wrong basin: true
 loop closures look large there, the kernel lets them go, and the decision rounds
-(`egnc.decision`) confirm a folded map (SE-Sync's torus3D: 477 of 4049 true loops rejected).
+(`egnc.robust.decision`) confirm a folded map (SE-Sync's torus3D: 477 of 4049 true loops rejected).
 Graduated non-convexity was meant to make the result independent of the guess; from a drifted
 guess it does not.
 
-The chordal initialization (`egnc.chordal`) does not read the guess at all. It is solved over
+The chordal initialization (`egnc.nonlinear.chordal`) does not read the guess at all. It is solved over
 the edges the GNC stage still trusts (IRLS weight at least `SolverOptions.trust_weight`, the
 set the step solver factorizes): a loop the kernel switched off entirely there would bend the
 chordal map if false, and it would put its fill-in into both chordal factorizations (city10000
 at 50 % false loops: 6.9 s over every edge, against 2.5 s for the whole default solve). A map
 that false loops still bend is easy to recognise by the truncated least-squares cost
-(`egnc.decision.truncated_cost`), the objective both decisions are judged by: an accepted loop
+(`egnc.robust.decision.truncated_cost`), the objective both decisions are judged by: an accepted loop
 pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 
 1. Classify every loop, trusted or not, at the chordal poses (`r^2 <= chi2.ppf(q, d)` accepted),
@@ -34,7 +34,7 @@ pays `r^2 / 2`, a rejected one `chi2.ppf(q, d) / 2`. So:
 
 On a graph with false loops and a good guess, this costs one chordal solve and changes nothing;
 on a clean graph with a drifted guess it returns the least-squares optimum with every loop
-accepted. Where the GNC stage began at the runs start's chordal map (`egnc.regroup`: the known
+accepted. Where the GNC stage began at the runs start's chordal map (`egnc.robust.regroup`: the known
 inliers and the loops in runs, a map the decision did not contradict), that map is the one
 classified in step 1: it reads no guess either, and it spares a second chordal solve (on the
 shared files every decision stayed the same but one, which rejects one false loop more;
@@ -67,10 +67,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from egnc.decision import Decision, StartContext, truncated_cost
-from egnc.factors import to_matrices
-from egnc.gnc import GncOutcome, StageReport, StageStart, classify_inliers
-from egnc.least_squares import NUMERICAL_FAILURE, Problem, SolverResult, solve_least_squares
+from egnc.nonlinear.factors import to_matrices
+from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, Problem, SolverResult, solve_least_squares
+from egnc.robust.decision import Decision, StartContext, truncated_cost
+from egnc.robust.gnc import GncOutcome, StageReport, StageStart, classify_inliers
 
 PROBE_ITERATIONS = 2
 """Least-squares iterations a chordal classification gets to show a lower truncated cost than

@@ -3,14 +3,14 @@
 riSAM and EGNC-PGO are incremental back-ends. Between two updates the map is converged; an
 update adds poses, odometry and loop closures, and the loop closures it adds start at `mu = 0`
 (quadratic SIG) and are graduated towards `mu = 1` (Geman-McClure) from the current estimate,
-by the schedule's rule (`egnc.schedules`, DESIGN.md sections 3 and 7):
+by the schedule's rule (`egnc.robust.schedules`, DESIGN.md sections 3 and 7):
 
 - `risam`: the graduating loops share riSAM's sequence `0, 0.12, 0.384, 0.965, 1`;
 - `egnc`: each graduating loop goes `0 -> mu*(r) -> 1`, or `0 -> 1` once its residual passed the
   strong-outlier threshold (chi-square 0.9); with `OnlineOptions.strong_at_arrival`, a new loop
   already past it at the current estimate starts at `mu = 1`.
 
-Each stage of the graduation is a warm-started IRLS solve (`egnc.least_squares`) of the whole
+Each stage of the graduation is a warm-started IRLS solve (`egnc.nonlinear.least_squares`) of the whole
 current graph, or of the poses around the change (below), with the other loops at their own `mu`.
 The last stage (every graduating loop at `mu = 1`) starts from the lower of two maps, by their
 cost at its `mu`: the one the earlier stages left, or the one before the update. A false loop,
@@ -30,25 +30,25 @@ running estimate that went astray on some logs (docs/online.md has the measureme
 Every loop stays in every solve with its IRLS weight, so a loop rejected early comes back when
 later evidence pulls the map towards it (its Geman-McClure weight grows as its residual falls,
 and its `mu_init` returns to 0), and a false loop accepted early leaves when later loops pull
-the map away from it. `result()` makes the batch decision (`egnc.decision`: least squares on the
+the map away from it. `result()` makes the batch decision (`egnc.robust.decision`: least squares on the
 accepted loops, re-test, re-admission by innovation) on the current estimate.
 
 What an update costs follows what changed: new poses are placed by composing their odometry from
 the current estimate, so an update that only extends the trajectory leaves every residual
 at the optimum and solves nothing. An update with a loop closure first solves the poses within
 `OnlineOptions.region_hops` (8) trusted edges of the new edges' ends, the poses around them held
-(`egnc.region`), and falls back to the whole map when the region's result is in doubt: when its
+(`egnc.online.region`), and falls back to the whole map when the region's result is in doubt: when its
 stages end a loop closure on the other side of the strong-outlier line than it began (an older
 one either way, a new one outwards), the update is redone on the whole map from its start; when
 the region's boundary would still move (its poses' own Newton steps would lower the cost by more
 than `OnlineOptions.boundary_share` of the update's tolerance), the last stage goes on over the
 whole map.
 A whole-map solve analyses the preconditioner of the edges the map trusts (ordering and symbolic
-factorization, `egnc.step_solver`); CG's operator is that system plus the other loops' own
+factorization, `egnc.linalg.step_solver`); CG's operator is that system plus the other loops' own
 terms, so no pattern of the whole grown system is built unless a step falls back to it.
 With `OnlineOptions(decide_at_arrival=True)` (`egnc` schedule) an update may solve nothing: its
 first stage (one Gauss-Newton step with the new loops at `mu = 0`) is predicted from a
-factorization of the map kept from the last whole-map solve (`egnc.arrival`), and when that
+factorization of the map kept from the last whole-map solve (`egnc.online.arrival`), and when that
 stage would leave every new loop strong, the bent map would cost no less at `mu = 1` than the
 map before it, the last stage predicted from there (the new loops' IRLS with the rest of the map
 held) lets them go, and their pull on the map is below the update's tolerance, the update ends
@@ -75,23 +75,23 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from egnc.api import Result, decided_fields, solve
-from egnc.arrival import ConvergedMap, FirstStage
-from egnc.checks import check_bool, check_choice, check_float, check_instance, check_int, describe
-from egnc.decision import decide_outliers, lower_by_more_than_rounding
 from egnc.errors import EgncError, GraphError, OptionError
-from egnc.factors import BetweenFactors, EdgeErrors, from_matrices, group_of, to_matrices
-from egnc.gnc import GncOptions, StageReport, classify_inliers
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph, is_dim
-from egnc.index_sets import sorted_unique
+from egnc.graph.checks import check_bool, check_choice, check_float, check_instance, check_int, describe
+from egnc.graph.index_sets import sorted_unique
+from egnc.graph.validity import first_bad_quaternion
 from egnc.io.checkpoint import CHECKPOINT_VERSION, read_checkpoint, write_checkpoint
-from egnc.kernels import make_kernel
-from egnc.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, SolverOptions, solve_least_squares
-from egnc.linear_solvers import resolve_name
-from egnc.losses import KernelLoss
-from egnc.mu_star import mu_star
-from egnc.region import LocalProblem, Neighbourhoods, block_jacobi_decrease
-from egnc.schedules import exceeds
-from egnc.validity import first_bad_quaternion
+from egnc.linalg.linear_solvers import resolve_name
+from egnc.nonlinear.factors import BetweenFactors, EdgeErrors, from_matrices, group_of, to_matrices
+from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, STATUS_MESSAGES, Problem, SolverOptions, solve_least_squares
+from egnc.online.arrival import ConvergedMap, FirstStage
+from egnc.online.region import LocalProblem, Neighbourhoods, block_jacobi_decrease
+from egnc.robust.decision import decide_outliers, lower_by_more_than_rounding
+from egnc.robust.gnc import GncOptions, StageReport, classify_inliers
+from egnc.robust.kernels import make_kernel
+from egnc.robust.losses import KernelLoss
+from egnc.robust.mu_star import mu_star
+from egnc.robust.schedules import exceeds
 
 __all__ = ["ONLINE_METHODS", "OnlineOptions", "OnlineSolver", "UpdateReport"]
 
@@ -131,7 +131,7 @@ class OnlineOptions:
             loops far off at arrival too (docs/online.md has the measurements).
         decide_at_arrival: `egnc` only: predict an update's first stage (one Gauss-Newton step
             with its new loops at `mu = 0`) from the map factorized after the last whole-map solve
-            (`egnc.arrival`), and solve nothing when the update would end where it starts, with
+            (`egnc.online.arrival`), and solve nothing when the update would end where it starts, with
             its new loops off (module docstring): fewer iterations and the same decisions, for a
             factorization of the map after every whole-map solve (docs/online.md says when
             that pays).
@@ -140,7 +140,7 @@ class OnlineOptions:
             was chosen).
         region_hops: an update with loop closures first solves the poses within this many
             trusted edges of its new edges' ends, with their other neighbours held
-            (`egnc.region`), and falls back to the whole map when the region's stages end a
+            (`egnc.online.region`), and falls back to the whole map when the region's stages end a
             loop on the other side of the strong-outlier line or its boundary would still move
             (module docstring; docs/online.md has the measurements). None: every update solves
             the whole map.
@@ -163,7 +163,7 @@ class OnlineOptions:
     boundary_share: float = 1e-3
 
     def __post_init__(self) -> None:
-        """Check every field's type and range (`egnc.checks`), storing plain Python values."""
+        """Check every field's type and range (`egnc.graph.checks`), storing plain Python values."""
         name = "OnlineOptions."
         checked: dict[str, object] = {
             "regraduate": check_choice(name + "regraduate", self.regraduate, ("reference", "new")),
@@ -208,12 +208,12 @@ class UpdateReport:
         time_s: wall time of the update in seconds.
         reanalysed: whether the whole map's system was re-analysed (ordering and symbolic
             factorization).
-        region_poses: poses the update solved as a local region (`egnc.region`); 0 when it
+        region_poses: poses the update solved as a local region (`egnc.online.region`); 0 when it
             solved nothing or only the whole map.
         whole_map: whether a stage solved the whole map (no region, or a fall-back from one).
         restarted: whether the last stage started from the map before the update, which cost
             less at the last stage's `mu` than the map the earlier stages had bent.
-        status: termination code of the last solve (`egnc.least_squares.STATUS_MESSAGES`); -1 when
+        status: termination code of the last solve (`egnc.nonlinear.least_squares.STATUS_MESSAGES`); -1 when
             nothing was solved.
     """
 
@@ -293,7 +293,7 @@ class OnlineSolver:
     Args:
         dim: 2 (SE(2)) or 3 (SE(3)).
         method: `"egnc"` (per-loop `mu*` and the strong-outlier rule) or `"risam"`.
-        linear_solver: `"auto"` or a backend of `egnc.linear_solvers.LINEAR_SOLVERS`.
+        linear_solver: `"auto"` or a backend of `egnc.linalg.linear_solvers.LINEAR_SOLVERS`.
         options: options of each GN/LM solve.
         gnc_options: kernel shape `c`, threshold conventions, outlier and re-admission quantiles
             (`warm_start`, `every_stage` and `max_stages` do not apply: online stages are always
@@ -367,7 +367,7 @@ class OnlineSolver:
         self._factors: BetweenFactors | None = None
         self._buffers: dict[str, np.ndarray] = {}  # the arrays _grow appends to, with room to spare
         self._neighbourhoods = Neighbourhoods()  # grown with the edges before each region is drawn
-        self._converged: ConvergedMap | None = None  # the map after its last whole-map solve (egnc.arrival)
+        self._converged: ConvergedMap | None = None  # the map after its last whole-map solve (egnc.online.arrival)
         self._last_status = -1
         self.last_update: UpdateReport | None = None
 
@@ -649,7 +649,7 @@ class OnlineSolver:
 
     def _first_stage(self, new_loops: np.ndarray, num_old_poses: int, num_old_edges: int) -> FirstStage | None:
         """The update's first stage predicted from the map factorized after the last whole-map
-        solve (`egnc.arrival`), or, when there is none, from the map as it was before this update
+        solve (`egnc.online.arrival`), or, when there is none, from the map as it was before this update
         (its first `num_old_poses` poses and `num_old_edges` edges); None where not predicted."""
         if not len(new_loops) or not self._predicts_first_stage():
             return None
@@ -732,7 +732,7 @@ class OnlineSolver:
         neighbourhoods = self._neighbourhoods
         if seeds is not None and hops is not None:
             neighbourhoods.grow(self._edges, len(self._vertex_ids))
-            # Hops go along the edges the map trusts (egnc.region.Neighbourhoods.within).
+            # Hops go along the edges the map trusts (egnc.online.region.Neighbourhoods.within).
             local = self._local_problem(neighbourhoods.within(seeds, hops, trusted), neighbourhoods)
         if local is None:
             analysed = self._problem is None
@@ -769,7 +769,7 @@ class OnlineSolver:
         """Whether a region's stages ended a loop on the other side of the strong-outlier line
         than `was_far` (`_far()` before them) had it: an older loop either way, a new loop
         (`new_loops`, the last loops added) outwards. Held at its boundary, a region strains
-        where the whole map would turn (`egnc.region`), so such a decision is the whole map's to
+        where the whole map would turn (`egnc.online.region`), so such a decision is the whole map's to
         make. Asked once the stages are done: a new loop's `mu = 0` stage bends the region and
         pushes older loops past the line for a stage, and the last stage, from the lower map,
         takes them back. A new loop that arrived past the line and ends inside it was taken by
@@ -958,7 +958,7 @@ class OnlineSolver:
 
     def _boundary_strained(self, local: LocalProblem, neighbourhoods: Neighbourhoods, whole_cost: float) -> bool:
         """Whether the boundary poses' own Newton steps would lower the cost by more than
-        `OnlineOptions.boundary_share` of the update's tolerance (`egnc.region.block_jacobi_decrease`), that
+        `OnlineOptions.boundary_share` of the update's tolerance (`egnc.online.region.block_jacobi_decrease`), that
         is of `rel_cost_tol` times `whole_cost`, the whole map's kernel cost."""
         boundary = local.boundary[local.boundary != self._gauge]
         if not len(boundary):
@@ -1063,10 +1063,10 @@ class OnlineSolver:
         """The current state as an `egnc.api.Result`, poses sorted by vertex id.
 
         Args:
-            decide: make the batch decision (`egnc.decision.decide_outliers`) on the current
+            decide: make the batch decision (`egnc.robust.decision.decide_outliers`) on the current
                 estimate (least squares on the accepted edges, re-test, re-admission), and again
                 by `egnc.solve` on the whole graph from its odometry (`init="odometry"`); keep
-                the batch one only where its truncated cost (`egnc.decision.truncated_cost`) is
+                the batch one only where its truncated cost (`egnc.robust.decision.truncated_cost`) is
                 lower by more than rounding (`lower_by_more_than_rounding`), as `egnc.solve`
                 chooses between its starts. The result's poses are that
                 decision's least-squares map. False: the current robust estimate and the

@@ -41,9 +41,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from egnc.errors import EgncError
-from egnc.factors import from_matrices, to_matrices
 from egnc.graph import PoseGraph
-from egnc.linear_solvers import make_linear_solver, resolve_name
+from egnc.linalg.linear_solvers import make_linear_solver, resolve_name
+from egnc.nonlinear.factors import from_matrices, to_matrices
 
 
 def chordal_initialization(

@@ -1,10 +1,10 @@
 """The graduated non-convexity driver: run a schedule's stages, each an IRLS solve.
 
-Stage k minimizes the loss the schedule chose from stage k-1's residuals (`egnc.schedules`) with
-the sparse GN/LM solver (`egnc.least_squares`), starting from the initial guess (GTSAM's
+Stage k minimizes the loss the schedule chose from stage k-1's residuals (`egnc.robust.schedules`) with
+the sparse GN/LM solver (`egnc.nonlinear.least_squares`), starting from the initial guess (GTSAM's
 `GncOptimizer` protocol) or, with `warm_start`, from stage k-1's poses. Every edge stays in every
 solve: the solver's linear algebra keeps the cost of down-weighted loops low
-(`egnc.least_squares`). After the last stage, loop closures
+(`egnc.nonlinear.least_squares`). After the last stage, loop closures
 (robust edges) with `r^2 > chi2.ppf(outlier_quantile, d)` are classified as outliers (DESIGN.md
 section 4; `outlier_threshold="distance"` compares `r` instead); known inliers never are. Graduated
 methods then re-solve least squares on the accepted edges (`refine_on_inliers`).
@@ -24,13 +24,19 @@ from typing import Literal
 
 import numpy as np
 
-from egnc.checks import check_bool, check_choice, check_float, check_int
 from egnc.errors import EgncError
-from egnc.factors import BetweenFactors
 from egnc.graph import PoseGraph
-from egnc.least_squares import NUMERICAL_FAILURE, IterationCallback, Problem, SolverOptions, solve_least_squares
-from egnc.losses import FixedWeightLoss, KernelLoss
-from egnc.schedules import FIXED_LAST_STAGE_METHODS, Schedule, Stage, ThresholdConvention, exceeds
+from egnc.graph.checks import check_bool, check_choice, check_float, check_int
+from egnc.nonlinear.factors import BetweenFactors
+from egnc.nonlinear.least_squares import (
+    NUMERICAL_FAILURE,
+    IterationCallback,
+    Problem,
+    SolverOptions,
+    solve_least_squares,
+)
+from egnc.robust.losses import FixedWeightLoss, KernelLoss
+from egnc.robust.schedules import FIXED_LAST_STAGE_METHODS, Schedule, Stage, ThresholdConvention, exceeds
 
 START_OPTIONS = ("runs_start", "chordal_start", "chordal_all_start", "regroup_start", "elimination_start")
 """The `GncOptions` fields that switch the starts other than the initial guess; all False gives
@@ -61,7 +67,7 @@ class GncOptions:
             stops after two stages in a row that reached `SolverOptions.max_iterations` (the
             result then carries a warning).
         refine: graduated methods only (egnc, risam, gnc-gm, gnc-tls): after classification,
-            decide on least-squares maps of the accepted edges (`egnc.decision`): re-solve
+            decide on least-squares maps of the accepted edges (`egnc.robust.decision`): re-solve
             least squares on them (warm-started, with the caller's `SolverOptions`), reject the
             accepted loops that still exceed the threshold, re-admit rejected ones (`readmit`),
             and repeat until the classification holds. Skipped when dropping the rejected
@@ -77,7 +83,7 @@ class GncOptions:
             raised to `1 - readmit_false_alarms / L` where that is above `readmit_quantile`
             (by default on graphs of more than 10 000 loops): the expected number of honest
             loops its test keeps out of one graph stays at most this many, however large the
-            graph (`egnc.decision.readmit_quantile`). None: every graph uses `readmit_quantile`.
+            graph (`egnc.robust.decision.readmit_quantile`). None: every graph uses `readmit_quantile`.
         warm_start: start each stage from the previous stage's solution (True) or, as GTSAM's
             `GncOptimizer` does, from the initial guess (False). From a drifted odometry guess
             the first, least-squares stage bends the map to fit every false loop; warm-started
@@ -88,7 +94,7 @@ class GncOptions:
             and decision as solving every stage, bit for bit; docs/method.md).
         runs_start: with `refine`, start the GNC stage from the chordal initialization of the
             known inliers and the loop closures that come in runs agreeing with each other
-            (`egnc.regroup.runs_start`) instead of the initial guess, where that map has the
+            (`egnc.robust.regroup.runs_start`) instead of the initial guess, where that map has the
             lower truncated least-squares cost: it reads the guess only between poses a few
             rows apart, so a drifted guess does not decide which basin the stage settles in.
             Where that start's decision rejects a whole run, the GNC stage also runs from the
@@ -96,19 +102,19 @@ class GncOptions:
         chordal_start: with `refine`, where the chordal initialization (which does not read
             the initial guess) accepts loops that the first decision rejects, decide a second
             time from there with those loops added to the first decision's, and keep the
-            decision of lower truncated least-squares cost (`egnc.starts`): from a drifted guess
+            decision of lower truncated least-squares cost (`egnc.robust.starts`): from a drifted guess
             the GNC stage can settle in a wrong basin that the decision rounds confirm.
         chordal_all_start: with `refine`, where the best decision so far rejects a few loops,
             run the GNC stage again from the chordal initialization of every edge and decide
-            from there, if that map fits better than the initial guess (`egnc.starts`), and keep
+            from there, if that map fits better than the initial guess (`egnc.robust.starts`), and keep
             it if its truncated cost is lower: a GNC stage from a drifted guess can switch off
             true loops that no map of the trusted edges brings back.
         regroup_start: with `refine`, decide once more with the rejected loops that come in runs
             (both ends within a few poses of each other's) put back together, from the chordal
-            initialization over them and the accepted edges (`egnc.regroup`), where such runs
+            initialization over them and the accepted edges (`egnc.robust.regroup`), where such runs
             exist, and keep it if its truncated cost is lower.
         elimination_start: with `refine`, decide once more by backward elimination from least
-            squares over every edge (`egnc.elimination`) where that is cheap (few loop closures),
+            squares over every edge (`egnc.robust.elimination`) where that is cheap (few loop closures),
             and keep it if its truncated cost is lower: on a weakly constrained map least squares
             fits false loops that the other starts' robust stage keeps out, at the price of
             honest loops the map cannot vouch for.
@@ -143,7 +149,7 @@ class GncOptions:
     stage_rel_cost_tol: float | None = None
 
     def __post_init__(self) -> None:
-        """Check every field's type and range (`egnc.checks`), storing plain Python values."""
+        """Check every field's type and range (`egnc.graph.checks`), storing plain Python values."""
         checked: dict[str, object] = {
             "c": check_float("GncOptions.c", self.c, 0.0, open_low=True),
             "max_stages": check_int("GncOptions.max_stages", self.max_stages, 1),
@@ -197,18 +203,18 @@ class StageReport:
         iterations: accepted solver steps.
         cost: the stage's own (robust or weighted) cost at its end.
         time_s: wall time of the stage in seconds.
-        status: solver termination code (see `egnc.least_squares.STATUS_MESSAGES`).
+        status: solver termination code (see `egnc.nonlinear.least_squares.STATUS_MESSAGES`).
         active_edges: edges in the stage's solve (the accepted ones in a refinement round).
-        cg_iterations: conjugate-gradient iterations of the stage's steps (`egnc.step_solver`;
+        cg_iterations: conjugate-gradient iterations of the stage's steps (`egnc.linalg.step_solver`;
             0 when every step was solved directly).
         kind: `"gnc"` (a graduated stage), `"decision"` (a least-squares round of
-            `egnc.decision`), `"probe"` (the few iterations `egnc.starts` gives the chordal
+            `egnc.robust.decision`), `"probe"` (the few iterations `egnc.robust.starts` gives the chordal
             start; it stops at its iteration limit by design) or `"elimination"` (a least-squares
-            solve of `egnc.elimination`'s backward elimination).
+            solve of `egnc.robust.elimination`'s backward elimination).
         start: the start the stage belongs to: `"guess"`, `"runs"` (the GNC stage from the
-            chordal map of the loops in runs, `egnc.regroup.runs_start`), `"chordal"` or
-            `"chordal-all"` (`egnc.starts`), `"regrouped"` (`egnc.regroup`), `"elimination"`
-            (`egnc.elimination`) or `"online"` (the estimate of `egnc.online.OnlineSolver`);
+            chordal map of the loops in runs, `egnc.robust.regroup.runs_start`), `"chordal"` or
+            `"chordal-all"` (`egnc.robust.starts`), `"regrouped"` (`egnc.robust.regroup`), `"elimination"`
+            (`egnc.robust.elimination`) or `"online"` (the estimate of `egnc.online.OnlineSolver`);
             only the stages of the start that was kept (`Result.start`) shape the result.
     """
 

@@ -309,7 +309,7 @@ def _sig_functions(c: float):
         """EGNC eq. 2 divided through by `D^3`: `q (q^2 + (1 - 2 mu) s ((mu + 2) q + (1 - mu) s))`.
 
         Uses `q + s = 1` to make the bracket homogeneous, so no term cancels against `1` when `u`
-        is large (see `egnc.mu_star`).
+        is large (see `egnc.robust.mu_star`).
         """
         q, s = _sig_ratios(r, mu, c)
         return q * (q * q + (1.0 - 2.0 * mu) * s * ((mu + 2.0) * q + (1.0 - mu) * s))

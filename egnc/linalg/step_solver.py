@@ -45,8 +45,8 @@ from typing import Literal
 import numpy as np
 import scipy.sparse as sp
 
-from egnc.connectivity import connected_components
-from egnc.linear_solvers import (
+from egnc.graph.connectivity import connected_components
+from egnc.linalg.linear_solvers import (
     Backend,
     Factorization,
     LinearSolver,
@@ -57,7 +57,7 @@ from egnc.linear_solvers import (
     make_linear_solver,
     orders_by_factorizing,
 )
-from egnc.normal_equations import NormalEquationsPattern, block_indices
+from egnc.linalg.normal_equations import NormalEquationsPattern, block_indices
 
 LinearMethod = Literal["auto", "direct"]
 LINEAR_METHODS = ("auto", "direct")
@@ -147,7 +147,7 @@ class WholeSystem:
     A robust problem's steps mostly go through CG with the trusted preconditioner, whose operator
     is the trusted system plus the other edges' own products (`StepSolver`): it needs neither the
     whole pattern (and its scatter map, `(E, 2d, 2d + 1)` slots) nor its solver. They are built for
-    a direct step, a CG fallback, or a caller that reads them (e.g. `egnc.marginals`).
+    a direct step, a CG fallback, or a caller that reads them (e.g. `egnc.nonlinear.marginals`).
 
     Attributes:
         free_index: `(N,)` unknown-block index of each pose, -1 for a fixed pose, as in `pattern`.
@@ -461,7 +461,7 @@ class StepSolver:
 
     def trusted_factorization(self, products: np.ndarray, trusted: np.ndarray) -> Factorization | None:
         """The factorization of `H_T`, the sum of exactly the `trusted` `(E,)` edges' `products`
-        (`(E, 2d, 2d + 1)`, `egnc.normal_equations.edge_products`), undamped, over this system's unknowns.
+        (`(E, 2d, 2d + 1)`, `egnc.linalg.normal_equations.edge_products`), undamped, over this system's unknowns.
 
         It reuses the analysis `set_system(trusted=...)` made for the same set, and is valid until
         a step of this solver factorizes that set again (a backend factorizes in place). None when
