@@ -17,7 +17,8 @@ over all edges and the solve time. The cases:
 
 `python benchmarks/unchanged.py compare BEFORE.jsonl AFTER.jsonl` prints one markdown table: per
 group of cases, how many have the same rejected edges and start, the largest relative change of
-the final cost, and the median time ratio (after / before); it exits 1 if any decision differs.
+the final cost, and the median time ratio (after / before); it exits 1 if any
+decision differs. Cases missing from AFTER (a scan with `--only`) are counted, not compared.
 """
 
 from __future__ import annotations
@@ -190,14 +191,19 @@ def compare(args: argparse.Namespace) -> int:
     differ_any = False
     for group in dict.fromkeys(key[0] for key in before):
         keys = [key for key in before if key[0] == group and key in after]
+        if not keys:
+            continue
         same = [k for k in keys if (before[k]["sha1"], before[k]["start"]) == (after[k]["sha1"], after[k]["start"])]
         differ = [k[1] for k in keys if k not in same]
-        differ_any |= bool(differ) or len(keys) < sum(1 for k in before if k[0] == group)
+        differ_any |= bool(differ)
         change = max(abs(after[k]["cost"] - before[k]["cost"]) / max(abs(before[k]["cost"]), 1e-300) for k in keys)
         ratio = float(np.median([after[k]["time_s"] / max(before[k]["time_s"], 1e-9) for k in keys]))
         print(
             f"| {group} | {len(same)} of {len(keys)} | {', '.join(differ) or '-'} | {change:.1e} | {ratio:.2f}x |"
         )
+    missing = [key[1] for key in before if key not in after]
+    if missing:
+        print(f"\n{len(missing)} cases of {args.before} are not in {args.after}.")
     return 1 if differ_any else 0
 
 
