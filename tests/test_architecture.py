@@ -57,7 +57,8 @@ def _egnc_imports(path: Path) -> list[tuple[str, int]]:
         if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("egnc.") and node.level == 0:
             found.append((node.module[len("egnc.") :], node.lineno))
         elif isinstance(node, ast.Import):
-            found += [(alias.name[len("egnc.") :], node.lineno) for alias in node.names if alias.name.startswith("egnc.")]
+            names = [alias.name for alias in node.names if alias.name.startswith("egnc.")]
+            found += [(name[len("egnc.") :], node.lineno) for name in names]
     return found
 
 
@@ -65,7 +66,11 @@ def test_every_import_points_to_its_own_layer_or_below():
     upward = []
     for name, path in _modules():
         own = _layer_of(name)
-        upward += [f"egnc.{name}:{line} imports egnc.{target}" for target, line in _egnc_imports(path) if _layer_of(target) > own]
+        upward += [
+            f"egnc.{name}:{line} imports egnc.{target}"
+            for target, line in _egnc_imports(path)
+            if _layer_of(target) > own
+        ]
     assert upward == []
 
 
