@@ -10,7 +10,11 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).parents[1]
-PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+PAGES = [REPO / "README.md", REPO / "BENCHMARKS.md", REPO / "RELIABILITY.md", *sorted((REPO / "docs").glob("*.md"))]
+# Pages for users that say what holds today: no issue or session numbers (the history keeps those).
+USER_PAGES = ["BENCHMARKS.md", "RELIABILITY.md"] + [
+    f"docs/{name}.md" for name in ("comparison", "conventions", "decisions", "evaluation", "g2o", "install", "overview")
+]
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 
@@ -55,3 +59,15 @@ def test_readme_stays_a_newcomer_page():
     lines = (REPO / "README.md").read_text(encoding="utf-8").splitlines()
     assert len(lines) <= 160
     assert "## Robust default and initial guesses" in lines
+
+
+def test_benchmarks_is_one_page_of_current_figures():
+    lines = (REPO / "BENCHMARKS.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 400
+
+
+@pytest.mark.parametrize("name", USER_PAGES)
+def test_user_pages_carry_no_issue_or_session_numbers(name):
+    text = (REPO / name).read_text(encoding="utf-8")
+    found = re.findall(r"(?i)\bissues?[ -]#?\d+|\b\w+(?:-\w+)? session\b", text)
+    assert not found, f"{name}: {found}"
