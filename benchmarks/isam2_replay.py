@@ -44,7 +44,7 @@ import time
 
 import gtsam
 import numpy as np
-from gtsam_baseline import lm_params, load_g2o, values_to_arrays
+from _lib.gtsam_lm import lm_params, load_g2o, values_to_arrays
 
 from egnc.io import read_g2o
 from egnc.metrics import ate

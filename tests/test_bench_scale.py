@@ -1,4 +1,4 @@
-"""benchmarks/bench_ls_scale.py and bench_robust_speed.py --grid3d end to end on tiny generated grids.
+"""benchmarks/least_squares.py scale and bench_robust_speed.py --grid3d end to end on tiny generated grids.
 
 The figures themselves (times, memory) are what the scripts measure, so they are only checked for
 form and consistency here; BENCHMARKS.md records them at scale.
@@ -32,7 +32,7 @@ def rows(script: str, *args: str) -> list[list[str]]:
 
 @pytest.mark.skipif(not gtsam_available(), reason="needs the bench extra's gtsam")
 def test_ls_scale_egnc_and_gtsam_reach_the_same_cost_and_ratios_divide_the_medians():
-    table = rows("bench_ls_scale.py", "--poses", "300", "--backends", "scipy", "--runs", "2")
+    table = rows("least_squares.py", "scale", "--poses", "300", "--backends", "scipy", "--runs", "2")
     by_solver = {row[2]: row for row in table}
     assert set(by_solver) == {"egnc scipy", "gtsam"}
     egnc, gtsam = by_solver["egnc scipy"], by_solver["gtsam"]
@@ -49,7 +49,8 @@ def test_ls_scale_egnc_and_gtsam_reach_the_same_cost_and_ratios_divide_the_media
 
 
 def test_ls_scale_reports_a_process_over_the_time_limit_as_not_finished():
-    table = rows("bench_ls_scale.py", "--poses", "200", "--backends", "scipy", "--no-gtsam", "--timeout", "0.01")
+    options = ("--poses", "200", "--backends", "scipy", "--no-gtsam", "--timeout", "0.01")
+    table = rows("least_squares.py", "scale", *options)
     assert len(table) == 1 and table[0][2] == "egnc scipy" and table[0][3].startswith("not finished after")
 
 
