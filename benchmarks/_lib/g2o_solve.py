@@ -20,7 +20,6 @@ References:
 
 from __future__ import annotations
 
-import importlib.util
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +38,11 @@ class G2oRun:
 
 def g2o_available() -> bool:
     """Whether the `g2opy` wheel can be imported here."""
-    return importlib.util.find_spec("g2opy") is not None
+    try:
+        import g2opy  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def solve_g2o(
