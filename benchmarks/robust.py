@@ -3,7 +3,7 @@
     python benchmarks/robust.py clean [--data-dir DIR] [--files MIT,csail,...] [--gtsam-chordal]
     python benchmarks/robust.py drifted [--data-dir DIR] [--files ...] [--drifted ...] [--heading 0.1,0.3]
         [--scaled 10] [--seeds 1,2] [--extra FILE.g2o,...] [--time-limit 300] [--no-gtsam]
-    python benchmarks/robust.py gnc [--loss gm|tls] [--time-limit 600] FILE ...
+    python benchmarks/robust.py gnc [--loss gm|tls] [--time-limit 600] [FILE ...]
 
 - `clean` (`_lib/robust_clean.py`): files without false loops, the default `egnc.solve` against
   `l2`: loops rejected, ATE to the `l2` optimum, both costs, warnings and times.
@@ -61,7 +61,7 @@ def parser() -> argparse.ArgumentParser:
     drifted.add_argument("--no-gtsam", action="store_true")
 
     gnc = commands.add_parser("gnc", help="GTSAM's GncLMOptimizer on g2o files, under a time limit")
-    gnc.add_argument("files", nargs="+", help="g2o files or dataset names")
+    gnc.add_argument("files", nargs="*", help="g2o files or dataset names (default: the reference datasets)")
     gnc.add_argument("--loss", choices=("gm", "tls"), default="tls", help="GNC-GM or GNC-TLS (default tls)")
     gnc.add_argument("--time-limit", type=float, default=600.0, help="seconds per file")
     return top

@@ -5,7 +5,7 @@ GNC uses GTSAM's defaults (inlier threshold 0.5 chi2(0.99, d) on the factor erro
 in 4.3 `setKnownInliers` appends to the existing list). Each run happens in a child process that
 is killed at a time limit, so a stuck GTSAM solve becomes a reported timeout instead of a hang.
 
-`python benchmarks/robust.py gnc [--loss gm|tls] files...` prints the table (`report_gnc`).
+`python benchmarks/robust.py gnc [--loss gm|tls] [files...]` prints the table (`report_gnc`).
 
 References:
 - GTSAM 4.3, `gtsam/nonlinear/GncOptimizer.h`.
@@ -26,7 +26,7 @@ from typing import Literal
 import gtsam
 import numpy as np
 
-from .gtsam_lm import LoadedGraph, header, lm_params, load_g2o, values_to_arrays
+from .gtsam_lm import REFERENCE_ERRORS, LoadedGraph, header, lm_params, load_g2o, values_to_arrays
 from .paths import dataset_path
 
 GncKind = Literal["gm", "tls"]
@@ -197,8 +197,8 @@ def format_gnc_table(results: Sequence[GncResult]) -> str:
 
 
 def report_gnc(files: Sequence[str], kind: GncKind, time_limit_s: float, command: str) -> int:
-    """Print the GNC table of `files`; 1 if a run did not finish."""
+    """Print the GNC table of `files` (every reference dataset when empty); 1 if a run did not finish."""
     print(header(command))
-    results = [run_gnc(name, kind, time_limit_s) for name in files]
+    results = [run_gnc(name, kind, time_limit_s) for name in files or list(REFERENCE_ERRORS)]
     print(format_gnc_table(results))
     return 0 if all(r.status == "ok" for r in results) else 1
