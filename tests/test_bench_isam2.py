@@ -1,4 +1,4 @@
-"""benchmarks/isam2_replay.py (GTSAM's ISAM2 replaying a graph pose by pose) on the shipped grids."""
+"""benchmarks/online.py isam2 (GTSAM's ISAM2 replaying a graph pose by pose) on the shipped grids."""
 
 from __future__ import annotations
 
@@ -23,9 +23,9 @@ def test_isam2_replay_ends_at_the_least_squares_optimum(name: str, tmp_path: Pat
     pytest.importorskip("gtsam")
     path = ROOT / "datasets" / f"{name}.g2o"
     estimate_path = tmp_path / "estimate.g2o"
-    script = ROOT / "benchmarks" / "isam2_replay.py"
+    script = ROOT / "benchmarks" / "online.py"
     completed = subprocess.run(
-        [sys.executable, str(script), str(path), "--reference", "--output", str(estimate_path)],
+        [sys.executable, str(script), "isam2", str(path), "--reference", "--output", str(estimate_path)],
         capture_output=True,
         text=True,
         check=True,

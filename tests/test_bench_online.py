@@ -1,4 +1,4 @@
-"""benchmarks/bench_online.py end to end on a small generated graph, and its merge of repeats.
+"""benchmarks/online.py replay end to end on a small generated graph, and its merge of repeats.
 
 What the replays cost is measured in BENCHMARKS.md; here the table is checked for form and for
 what holds on any graph: the repeats of a deterministic replay agree, the ratio of repeated runs
@@ -19,10 +19,10 @@ from egnc.datasets import grid_world
 from egnc.io import write_g2o
 
 ROOT = Path(__file__).parents[1]
-SCRIPT = ROOT / "benchmarks" / "bench_online.py"
+SCRIPT = ROOT / "benchmarks" / "online.py"
 sys.path.insert(0, str(SCRIPT.parent))  # the benchmarks are scripts, imported as test_fuzz imports fuzz
 
-import bench_online  # noqa: E402
+from _lib import online_replay  # noqa: E402
 
 
 def test_repeats_alternate_and_give_the_ratio_range(tmp_path):
@@ -51,8 +51,8 @@ def test_repeats_alternate_and_give_the_ratio_range(tmp_path):
 
 
 def test_repeats_that_differ_stop_the_bench():
-    row = {"method": "egnc", "P": 1.0, "iterations": 10, **{key: 1.0 for key in bench_online.TIMES}}
-    merged = bench_online.combined([row, {**row, "total_s": 3.0}, {**row, "total_s": 2.0}])
+    row = {"method": "egnc", "P": 1.0, "iterations": 10, **{key: 1.0 for key in online_replay.TIMES}}
+    merged = online_replay.combined([row, {**row, "total_s": 3.0}, {**row, "total_s": 2.0}])
     assert merged["total_s"] == 2.0 and merged["iterations"] == 10
     with pytest.raises(SystemExit, match="iterations"):
-        bench_online.combined([row, {**row, "iterations": 11}])
+        online_replay.combined([row, {**row, "iterations": 11}])

@@ -1,4 +1,4 @@
-"""benchmarks/bench_ls_scale.py and bench_robust_speed.py --grid3d end to end on tiny generated grids.
+"""benchmarks/least_squares.py scale and robust_speed.py --grid3d end to end on tiny generated grids.
 
 The figures themselves (times, memory) are what the scripts measure, so they are only checked for
 form and consistency here; BENCHMARKS.md records them at scale.
@@ -32,7 +32,7 @@ def rows(script: str, *args: str) -> list[list[str]]:
 
 @pytest.mark.skipif(not gtsam_available(), reason="needs the bench extra's gtsam")
 def test_ls_scale_egnc_and_gtsam_reach_the_same_cost_and_ratios_divide_the_medians():
-    table = rows("bench_ls_scale.py", "--poses", "300", "--backends", "scipy", "--runs", "2")
+    table = rows("least_squares.py", "scale", "--poses", "300", "--backends", "scipy", "--runs", "2")
     by_solver = {row[2]: row for row in table}
     assert set(by_solver) == {"egnc scipy", "gtsam"}
     egnc, gtsam = by_solver["egnc scipy"], by_solver["gtsam"]
@@ -49,14 +49,15 @@ def test_ls_scale_egnc_and_gtsam_reach_the_same_cost_and_ratios_divide_the_media
 
 
 def test_ls_scale_reports_a_process_over_the_time_limit_as_not_finished():
-    table = rows("bench_ls_scale.py", "--poses", "200", "--backends", "scipy", "--no-gtsam", "--timeout", "0.01")
+    options = ("--poses", "200", "--backends", "scipy", "--no-gtsam", "--timeout", "0.01")
+    table = rows("least_squares.py", "scale", *options)
     assert len(table) == 1 and table[0][2] == "egnc scipy" and table[0][3].startswith("not finished after")
 
 
 @pytest.mark.parametrize("clean_init", ["auto", "file", "chordal"])
 def test_robust_speed_grid3d_rows_are_3d_grids_with_their_decisions(clean_init):
     table = rows(
-        "bench_robust_speed.py",
+        "robust_speed.py",
         *("--datasets", "", "--grid3d", "300", "--percent", "30", "--backends", "scipy", "--clean-init", clean_init),
     )
     assert len(table) == 1
@@ -70,20 +71,9 @@ def test_robust_speed_grid3d_rows_are_3d_grids_with_their_decisions(clean_init):
     assert 0 <= float(row[13]) <= 1 and 0 <= float(row[14]) <= 1
 
 
-def test_reach_bench_rows_agree_with_the_whole_solve_and_say_which_path_the_default_takes():
-    options = ("--grid", "400", "--grid3d", "200", "--loops", "8", "--backends", "scipy", "--repeats", "1")
-    table = rows("bench_reach.py", *options)
-    assert [row[:2] for row in table] == [["2D 400", "scipy"], ["3D 200", "scipy"]]
-    for row in table:
-        assert int(row[4]) == 8 * (3 if row[0].startswith("2D") else 6)  # columns: d per left-out loop
-        assert 0.0 < float(row[5]) <= 1.0 and 0.0 < float(row[6]) <= 1.0  # shares of rows and entries
-        assert row[11] == "whole"  # fewer unknowns than REACH_MIN_UNKNOWNS
-        assert float(row[12]) < 1e-10
-
-
 def test_robust_speed_repeats_give_the_median_ratio_and_its_range():
     options = ("--datasets", "", "--grid", "300", "--percent", "30", "--backends", "scipy", "--repeats", "3")
-    (row,) = rows("bench_robust_speed.py", *options)
+    (row,) = rows("robust_speed.py", *options)
     assert row[:4] == ["grid2d-300", "30", "1", "scipy"]
     median, spread = row[7].split(" ")
     low, high = (float(part) for part in spread.strip("()").split("-"))
@@ -92,10 +82,10 @@ def test_robust_speed_repeats_give_the_median_ratio_and_its_range():
 
 def test_robust_speed_refuses_repeats_that_decide_differently():
     sys.path.insert(0, str(BENCHMARKS))  # the benchmarks are scripts, imported as test_fuzz imports fuzz
-    import bench_robust_speed
+    import robust_speed
 
     first = {"clean_s": 1.0, "robust_s": 3.0, "clean_mib": 10.0, "peak_mib": 15.0, "rejected": 5}
-    merged = bench_robust_speed.combined([first, first | {"clean_s": 2.0, "robust_s": 2.0}, first])
+    merged = robust_speed.combined([first, first | {"clean_s": 2.0, "robust_s": 2.0}, first])
     assert merged["ratio"] == 3.0 and merged["ratio_range"] == (1.0, 3.0) and merged["clean_s"] == 1.0
     with pytest.raises(SystemExit, match="rejected"):
-        bench_robust_speed.combined([first, first | {"rejected": 6}])
+        robust_speed.combined([first, first | {"rejected": 6}])

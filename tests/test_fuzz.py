@@ -1,4 +1,4 @@
-"""Seeded fuzzing (benchmarks/fuzz.py, fuzz_options.py, fuzz_api.py, fuzz_checkpoints.py): each target, quickly.
+"""Seeded fuzzing (benchmarks/fuzz.py: the targets in benchmarks/_lib/fuzz_*.py): each target, quickly.
 
 Files: reading a mutant gives a `PoseGraph` or an `EgncError` (always the error for the invalid
 operators); solving an accepted one gives a result or an `EgncError`, a strict-JSON report, and
@@ -17,32 +17,35 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-import fuzz  # noqa: E402
-import fuzz_api  # noqa: E402
-import fuzz_checkpoints  # noqa: E402
-import fuzz_options  # noqa: E402
+from _lib import (  # noqa: E402
+    fuzz_api,
+    fuzz_checkpoints,
+    fuzz_core,
+    fuzz_files,
+    fuzz_options,
+)
 
 CASES = 300
 SEED = 11
 
 
 @pytest.fixture(scope="module")
-def outcomes() -> list[fuzz.Outcome]:
+def outcomes() -> list[fuzz_files.Outcome]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the mutants are meant to be odd; the outcomes are checked
-        return fuzz.fuzz(CASES, SEED)
+        return fuzz_files.fuzz(CASES, SEED)
 
 
 def test_fuzz_exercises_every_operator_and_both_outcomes_of_reading(outcomes):
     assert len(outcomes) == CASES
-    assert {outcome.operator for outcome in outcomes} == set(fuzz.OPERATORS)
+    assert {outcome.operator for outcome in outcomes} == set(fuzz_files.OPERATORS)
     reads = {outcome.read for outcome in outcomes}
     assert {"graph", "clean error"} <= reads
     assert sum(len(outcome.solves) for outcome in outcomes) > CASES // 2  # many mutants are solved
 
 
 def test_no_crash_no_hang_no_stdout_no_invalid_json(outcomes, capfd):
-    problems = [(k, outcome.operator, fuzz.bad(outcome)) for k, outcome in enumerate(outcomes)]
+    problems = [(k, outcome.operator, fuzz_files.bad(outcome)) for k, outcome in enumerate(outcomes)]
     problems = [(k, operator, found) for k, operator, found in problems if set(found) - {"non-finite result"}]
     assert problems == []
     assert capfd.readouterr().out == ""
@@ -54,14 +57,14 @@ def test_solutions_are_finite_or_a_reported_failure(outcomes):
 
 
 def test_invalid_mutants_are_refused_and_fix_all_has_nothing_to_optimize(outcomes):
-    invalid = [outcome for outcome in outcomes if outcome.operator in fuzz.INVALID_OPERATORS]
+    invalid = [outcome for outcome in outcomes if outcome.operator in fuzz_files.INVALID_OPERATORS]
     assert invalid and all(outcome.read == "clean error" for outcome in invalid)
     fixed = [outcome for outcome in outcomes if outcome.operator == "fix all" and outcome.read == "graph"]
     assert fixed and all(solve == "nothing to optimize" for outcome in fixed for solve in outcome.solves)
 
 
 def test_time_limit_turns_a_hang_into_a_class():
-    with pytest.raises(fuzz.Hang), fuzz.time_limit(0.05):
+    with pytest.raises(fuzz_core.Hang), fuzz_core.time_limit(0.05):
         while True:
             pass
 

@@ -159,7 +159,7 @@ def test_repr_is_short():
     ],
 )
 def test_arrays_that_are_not_numbers_name_the_field(change, message):
-    # Found by benchmarks/fuzz_api.py: NumPy's own ValueError or an AttributeError named nothing,
+    # Found by benchmarks/_lib/fuzz_api.py: NumPy's own ValueError or an AttributeError named nothing,
     # and float ids were truncated (1.5 -> 1) without a word.
     with pytest.raises(GraphError, match=f"^{message}"):
         dataclasses.replace(chain(), **change)

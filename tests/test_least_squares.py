@@ -19,7 +19,7 @@ BACKENDS = [
 ]
 
 # GTSAM 4.3 LevenbergMarquardtOptimizer from each file's initial guess, prior sigma 1e-3 on the
-# first pose, relative/absolute error tolerance 1e-12 (benchmarks/gtsam_baseline.py reproduces them).
+# first pose, relative/absolute error tolerance 1e-12 (`benchmarks/least_squares.py reference` reproduces them).
 GTSAM_OPTIMA = {
     "csail.g2o": 19.56406892,
     "intel.g2o": 273.2315612,

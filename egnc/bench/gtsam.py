@@ -1,6 +1,6 @@
 """GTSAM baselines of the benchmark grid (the optional `bench` extra's `gtsam` wheel).
 
-The runs follow `benchmarks/gtsam_baseline.py`: the graph goes through a temporary g2o file and
+The runs follow `benchmarks/_lib/gtsam_lm.py`: the graph goes through a temporary g2o file and
 `gtsam.readG2o`, a prior with sigma 1e-3 holds the lowest id at its initial value, the known
 inliers are the odometry factors and that prior, GNC (`GncLMOptimizer`) uses GTSAM's default
 parameters (inner LM included) and least squares (`LevenbergMarquardtOptimizer`) the reference
@@ -26,7 +26,7 @@ from egnc.nonlinear.factors import from_matrices
 __all__ = ["GTSAM_PRIOR_SIGMA", "add_gtsam_reference_prior", "gtsam_available", "gtsam_solve"]
 
 GTSAM_PRIOR_SIGMA = 1e-3
-"""Isotropic sigma of the prior that fixes GTSAM's gauge (benchmarks/gtsam_baseline.py)."""
+"""Isotropic sigma of the prior that fixes GTSAM's gauge (benchmarks/_lib/gtsam_lm.py)."""
 
 
 def gtsam_available() -> bool:

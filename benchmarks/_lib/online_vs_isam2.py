@@ -1,6 +1,6 @@
 """egnc's online replay of a corrupted graph against GTSAM's ISAM2 replaying the clean one, as whole processes.
 
-    nice -n 10 python benchmarks/bench_online_vs_isam2.py [--datasets manhattanOlson3500,sphere2500,city10000]
+    nice -n 10 python benchmarks/online.py vs-isam2 [--datasets manhattanOlson3500,sphere2500,city10000]
         [--percent 30] [--seed 1] [--repeats 1] [--relinearize-skips 10] [--egnc-timeout 1200]
         [--isam2-timeout 600] [--region-hops N] [--boundary-share S] [--decide-at-arrival] [--json rows.jsonl]
 
@@ -9,12 +9,12 @@ protocol, `--seed`) and its labels to a temporary folder; then, `--repeats` time
 (A, B, A, B ...), two child processes run:
 - A: `egnc-solve CORRUPTED --online --report R.json -o OUT.g2o` (the report's `online` object gives
   the update total and latency; OUT.g2o the final estimate);
-- B: `python benchmarks/isam2_replay.py CLEAN --relinearize-skip S` for each `S` of
+- B: `python benchmarks/online.py isam2 CLEAN --relinearize-skip S` (`isam2_replay`) for each `S` of
   `--relinearize-skips` (non-robust ISAM2 on the clean graph, an estimate after every update).
 Each child's wall time is taken around its start and `os.wait4`, its peak memory is the
 `ru_maxrss` that `os.wait4` returns. A child still running at its timeout is killed; the row then
 says how far egnc's replay got (its last progress line). After the timed runs, one untimed
-`isam2_replay.py --output` run per `S` gives ISAM2's final estimate.
+`online.py isam2 --output` run per `S` gives ISAM2's final estimate.
 
 Columns (medians over the repeats):
 - `wall s`: the whole process (start, imports, reading, the replay; for egnc also its final batch
@@ -38,60 +38,17 @@ import json
 import os
 import platform
 import shutil
-import signal
 import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-DATASETS = Path(os.environ.get("EGNC_DATASETS", HERE.parents[1] / "shared" / "datasets"))
-
-
-@dataclass(frozen=True)
-class ChildRun:
-    """One finished (or killed) child process: `wall_s` seconds, `peak_mib` from `ru_maxrss`."""
-
-    returncode: int
-    timed_out: bool
-    wall_s: float
-    peak_mib: float
-    stdout: str
-    stderr: str
-
-
-def run_child(command: list[str], timeout_s: float, folder: Path) -> ChildRun:
-    """Run `command` in its own session; kill its group at `timeout_s`; time it and read its rusage."""
-    out, err = folder / "child.out", folder / "child.err"
-    with open(out, "w") as stdout, open(err, "w") as stderr:
-        started = time.perf_counter()
-        process = subprocess.Popen(command, stdout=stdout, stderr=stderr, start_new_session=True)
-        killed = threading.Event()
-
-        def kill() -> None:
-            killed.set()
-            os.killpg(process.pid, signal.SIGKILL)
-
-        timer = threading.Timer(timeout_s, kill)
-        timer.start()
-        _, status, usage = os.wait4(process.pid, 0)
-        wall_s = time.perf_counter() - started
-        timer.cancel()
-    process.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
-    return ChildRun(
-        returncode=process.returncode,
-        timed_out=killed.is_set(),
-        wall_s=wall_s,
-        peak_mib=usage.ru_maxrss / 1024.0,
-        stdout=out.read_text(),
-        stderr=err.read_text(),
-    )
+from .paths import ENTRIES, SHARED_DATASETS
+from .processes import ChildRun, run_child
 
 
 def egnc_row(run: ChildRun, report_path: Path, estimate_path: Path, is_outlier, reference, dim) -> dict:
@@ -123,7 +80,7 @@ def egnc_row(run: ChildRun, report_path: Path, estimate_path: Path, is_outlier, 
 
 
 def isam2_row(run: ChildRun, skip: int) -> dict:
-    """ISAM2's figures from its child run (the JSON line `isam2_replay.py` prints)."""
+    """ISAM2's figures from its child run (the JSON line `online.py isam2` prints)."""
     row: dict = {"engine": f"ISAM2 skip {skip}", "wall_s": run.wall_s, "peak_mib": run.peak_mib}
     if run.timed_out or run.returncode != 0:
         row["failure"] = "timeout" if run.timed_out else f"exit {run.returncode}: {run.stderr.strip()[-300:]}"
@@ -172,6 +129,11 @@ HEADER = (
 )
 
 
+def isam2_command(clean: Path, skip: int) -> list[str]:
+    """The child that replays `clean` through ISAM2 with `relinearizeSkip` `skip` (`online.py isam2`)."""
+    return [sys.executable, str(ENTRIES / "online.py"), "isam2", str(clean), "--relinearize-skip", str(skip)]
+
+
 def bench_dataset(name: str, args: argparse.Namespace, folder: Path) -> list[str]:
     """Corrupt, run the alternated children, check ISAM2's estimate; the dataset's markdown rows."""
     from egnc.api import solve
@@ -179,7 +141,7 @@ def bench_dataset(name: str, args: argparse.Namespace, folder: Path) -> list[str
     from egnc.io import read_g2o
     from egnc.metrics import ate
 
-    clean = DATASETS / f"{name}.g2o"
+    clean = SHARED_DATASETS / f"{name}.g2o"
     corrupted = folder / f"{name}_{args.percent:g}.g2o"
     tools = Path(sys.executable).parent
     egnc_solve = str(tools / "egnc-solve") if (tools / "egnc-solve").exists() else shutil.which("egnc-solve")
@@ -204,20 +166,18 @@ def bench_dataset(name: str, args: argparse.Namespace, folder: Path) -> list[str
     isam2_runs: dict[int, list[dict]] = {skip: [] for skip in skips}
     for _ in range(args.repeats):
         if not any("failure" in row and row["failure"].startswith("timeout") for row in egnc_runs):
-            run = run_child(egnc_command, args.egnc_timeout, folder)
+            run = run_child(egnc_command, args.egnc_timeout)
             egnc_runs.append(egnc_row(run, report, estimate, is_outlier, reference, graph.dim))
             print(f"  {name}: egnc {egnc_runs[-1]}", file=sys.stderr, flush=True)
         for skip in skips:
-            command = [sys.executable, str(HERE / "isam2_replay.py"), str(clean), "--relinearize-skip", str(skip)]
-            isam2_runs[skip].append(isam2_row(run_child(command, args.isam2_timeout, folder), skip))
+            isam2_runs[skip].append(isam2_row(run_child(isam2_command(clean, skip), args.isam2_timeout), skip))
             print(f"  {name}: isam2 {isam2_runs[skip][-1]}", file=sys.stderr, flush=True)
     rows = [format_row(name, args.percent, median_row(egnc_runs))]
     records = [*egnc_runs, *(row for skip in skips for row in isam2_runs[skip])]
     for skip in skips:
         row = median_row(isam2_runs[skip])
         if "failure" not in row:  # the final estimate, from one more (untimed) run
-            command = [sys.executable, str(HERE / "isam2_replay.py"), str(clean), "--relinearize-skip", str(skip)]
-            run_child([*command, "--output", str(estimate)], args.isam2_timeout, folder)
+            run_child([*isam2_command(clean, skip), "--output", str(estimate)], args.isam2_timeout)
             row["ate"] = ate(read_g2o(estimate).poses, reference, graph.dim)
         ratios = (ratio(egnc_runs, isam2_runs[skip], "wall_s"), ratio(egnc_runs, isam2_runs[skip], "total_s"))
         rows.append(format_row(name, args.percent, row, ratios))
@@ -228,21 +188,8 @@ def bench_dataset(name: str, args: argparse.Namespace, folder: Path) -> list[str
     return rows
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--datasets", default="manhattanOlson3500,sphere2500,city10000")
-    parser.add_argument("--percent", type=float, default=30.0)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--repeats", type=int, default=1, help="A, B pairs per dataset")
-    parser.add_argument("--relinearize-skips", default="10", help="ISAM2 variants, e.g. 10,1 (GTSAM's default is 10)")
-    parser.add_argument("--region-hops", type=int, help="egnc-solve --region-hops (default: egnc-solve's own)")
-    parser.add_argument("--boundary-share", type=float, help="egnc-solve --boundary-share (default: its own)")
-    parser.add_argument("--decide-at-arrival", action="store_true", help="egnc-solve --decide-at-arrival")
-    parser.add_argument("--egnc-timeout", type=float, default=1200.0, help="seconds before egnc's child is killed")
-    parser.add_argument("--isam2-timeout", type=float, default=600.0, help="seconds before ISAM2's child is killed")
-    parser.add_argument("--json", type=Path, help="append one JSON line per child run here")
-    args = parser.parse_args()
-
+def report(args: argparse.Namespace) -> int:
+    """Run every dataset's children and print the markdown table (`args`: the options of `online.py vs-isam2`)."""
     with open("/proc/loadavg") as load:
         load_start = load.read().split()[:3]
     print(
@@ -261,6 +208,3 @@ def main() -> int:
         print(f"load average at the end {' '.join(load.read().split()[:3])}", file=sys.stderr)
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

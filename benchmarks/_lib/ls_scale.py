@@ -1,6 +1,6 @@
 """Least squares at scale: `egnc-solve --method l2` against GTSAM's LM on generated grids.
 
-    python benchmarks/bench_ls_scale.py [--poses 100000,250000,500000,1000000] [--dim 2]
+    python benchmarks/least_squares.py scale [--poses 100000,250000,500000,1000000] [--dim 2]
         [--backends cholmod,rslab,scipy] [--no-gtsam] [--runs 1] [--timeout 600] [--init file|chordal]
 
 For each pose count a child process generates the clean grid (`egnc.datasets.grid_world`, seed
@@ -10,9 +10,9 @@ For each pose count a child process generates the clean grid (`egnc.datasets.gri
 - `egnc-solve FILE --method l2 --linear-solver B --init I -o OUT -q --report R.json`, one row per
   backend B: `solve (s)` is the report's `time_s` (the `egnc.solve` call alone: pattern,
   ordering, the LM steps);
-- `python benchmarks/gtsam_solve.py FILE OUT --init I --json` (`readG2o`, a prior on the first
-  pose, LM with tolerances 1e-10 and 100 iterations at most, as egnc's defaults, `writeG2o`):
-  `solve (s)` is `optimize()` alone (with `--init chordal`, GTSAM's LAGO or chordal
+- `python benchmarks/least_squares.py gtsam-solve FILE OUT --init I --json` (`gtsam_process`:
+  `readG2o`, a prior on the first pose, LM with tolerances 1e-10 and 100 iterations at most, as
+  egnc's defaults, `writeG2o`): `solve (s)` is `optimize()` alone (with `--init chordal`, GTSAM's LAGO or chordal
   initialization first, as egnc's time includes its own).
 
 GTSAM's `converged` means fewer than 100 iterations (it reports no reason).
@@ -26,17 +26,17 @@ ratios divide egnc's medians by GTSAM's on the same file in the same run.
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-GTSAM_SCRIPT = Path(__file__).resolve().parent / "gtsam_solve.py"
+from .paths import ENTRIES
+from .processes import ChildRun, run_child
+
+ENTRY = ENTRIES / "least_squares.py"
 
 
 def generate(poses: int, dim: int, path: Path) -> int:
@@ -47,27 +47,6 @@ def generate(poses: int, dim: int, path: Path) -> int:
     graph = grid_world(dim, poses, seed=1).graph
     write_g2o(graph, path)
     return graph.num_edges
-
-
-def run_process(command: list[str], timeout: float) -> tuple[str | None, float, float]:
-    """Run `command`; `(stdout or None if killed at timeout or failed, wall seconds, peak MiB)`."""
-    started = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    assert process.stdout is not None
-    killed = False
-    while True:
-        pid, status, usage = os.wait4(process.pid, os.WNOHANG)
-        if pid:
-            break
-        if not killed and time.perf_counter() - started > timeout:
-            process.kill()
-            killed = True
-        time.sleep(0.05)
-    wall = time.perf_counter() - started
-    output = process.stdout.read()
-    process.returncode = os.waitstatus_to_exitcode(status)
-    ok = not killed and process.returncode == 0
-    return (output if ok else None), wall, usage.ru_maxrss / 1024  # kilobytes on Linux
 
 
 def egnc_run(path: Path, backend: str, init: str, folder: Path, timeout: float) -> dict:
@@ -89,13 +68,13 @@ def egnc_run(path: Path, backend: str, init: str, folder: Path, timeout: float) 
         "--report",
         str(report),
     ]
-    output, wall, mib = run_process(command, timeout)
-    if output is None:
-        return {"wall_s": wall, "mib": mib, "failed": True}
+    run = run_child(command, timeout)
+    if not run.ok:
+        return _failed(run)
     figures = json.loads(report.read_text())
     return {
-        "wall_s": wall,
-        "mib": mib,
+        "wall_s": run.wall_s,
+        "mib": run.peak_mib,
         "solve_s": figures["time_s"],
         "cost": figures["final_cost_all_edges"],
         "iterations": figures["iterations"],
@@ -104,17 +83,23 @@ def egnc_run(path: Path, backend: str, init: str, folder: Path, timeout: float) 
 
 
 def gtsam_run(path: Path, init: str, folder: Path, timeout: float) -> dict:
-    """One `benchmarks/gtsam_solve.py` process on `path`; its figures."""
-    command = [sys.executable, str(GTSAM_SCRIPT), str(path), str(folder / "gtsam.g2o"), "--init", init, "--json"]
-    output, wall, mib = run_process(command, timeout)
-    if output is None:
-        return {"wall_s": wall, "mib": mib, "failed": True}
-    figures = json.loads(output.strip().splitlines()[-1])
+    """One `least_squares.py gtsam-solve` process on `path`; its figures."""
+    out = folder / "gtsam.g2o"
+    command = [sys.executable, str(ENTRY), "gtsam-solve", str(path), str(out), "--init", init, "--json"]
+    run = run_child(command, timeout)
+    if not run.ok:
+        return _failed(run)
+    figures = json.loads(run.stdout.strip().splitlines()[-1])
     converged = figures["iterations"] < 100
-    return {"wall_s": wall, "mib": mib, "solve_s": figures["solve_s"], "cost": figures["cost"]} | {
+    return {"wall_s": run.wall_s, "mib": run.peak_mib, "solve_s": figures["solve_s"], "cost": figures["cost"]} | {
         "iterations": figures["iterations"],
         "converged": converged,
     }
+
+
+def _failed(run: ChildRun) -> dict:
+    """The figures of a process killed at its time limit or failed."""
+    return {"wall_s": run.wall_s, "mib": run.peak_mib, "failed": True}
 
 
 def summary(runs: list[dict]) -> dict:
@@ -127,69 +112,46 @@ def summary(runs: list[dict]) -> dict:
     }
 
 
-
-
-def main() -> None:
-    """Parse arguments, generate each grid, time every solver on it, print the markdown table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--generate", nargs=3, help=argparse.SUPPRESS)  # POSES DIM PATH, in the child
-    parser.add_argument("--poses", default="100000,250000,500000,1000000")
-    parser.add_argument("--dim", type=int, choices=(2, 3), default=2)
-    parser.add_argument("--backends", default="cholmod,rslab,scipy")
-    parser.add_argument("--no-gtsam", action="store_true", help="time egnc only")
-    parser.add_argument("--runs", type=int, default=1)
-    parser.add_argument("--timeout", type=float, default=600.0, help="seconds after which a process is killed")
-    parser.add_argument("--init", choices=("file", "chordal"), default="file", help="the initial guess of both")
-    args = parser.parse_args()
-    if args.generate:
-        poses, dim, path = args.generate
-        print(generate(int(poses), int(dim), Path(path)))
-        return
-
-    solvers = [f"egnc {backend}" for backend in filter(None, args.backends.split(","))]
-    solvers += [] if args.no_gtsam else ["gtsam"]
+def run(poses: str, dim: int, backends: str, gtsam: bool, runs: int, timeout: float, init: str) -> None:
+    """Generate each grid of `poses` (comma-separated counts), time every solver on it, print the markdown table."""
+    solvers = [f"egnc {backend}" for backend in filter(None, backends.split(","))]
+    solvers += ["gtsam"] if gtsam else []
     from egnc.bench.report import installed_versions
 
     versions = installed_versions(("numpy", "scipy", "scikit-sparse", "rslab", "gtsam"))
-    print(f"{time.strftime('%Y-%m-%d %H:%M')}; {versions}; --init {args.init}\n")
+    print(f"{time.strftime('%Y-%m-%d %H:%M')}; {versions}; --init {init}\n")
     print(
         "| poses | edges | solver | wall (s) | solve (s) | peak MiB | cost | iterations | converged"
         " | wall / GTSAM | solve / GTSAM |"
     )
     print("|---:|---:|---|---:|---:|---:|---:|---:|---|---:|---:|")
-    for poses in (int(text) for text in filter(None, args.poses.split(","))):
+    for count in (int(text) for text in filter(None, poses.split(","))):
         with tempfile.TemporaryDirectory(prefix="egnc-ls-scale-") as name:
             folder = Path(name)
-            path = folder / f"grid{args.dim}d-{poses}.g2o"
-            done = subprocess.run(
-                [sys.executable, __file__, "--generate", str(poses), str(args.dim), str(path)],
-                capture_output=True,
-                text=True,
-                check=True,
-            )
+            path = folder / f"grid{dim}d-{count}.g2o"
+            done = run_child([sys.executable, str(ENTRY), "scale", "--generate", str(count), str(dim), str(path)])
+            if not done.ok:
+                raise SystemExit(f"generating {path.name} failed: {done.stderr.strip()[-300:]}")
             edges = int(done.stdout.strip().splitlines()[-1])
-            runs: dict[str, list[dict]] = {solver: [] for solver in solvers}
-            for _ in range(args.runs):
+            timed: dict[str, list[dict]] = {solver: [] for solver in solvers}
+            for _ in range(runs):
                 for solver in solvers:
                     if solver == "gtsam":
-                        runs[solver].append(gtsam_run(path, args.init, folder, args.timeout))
+                        timed[solver].append(gtsam_run(path, init, folder, timeout))
                     else:
-                        runs[solver].append(egnc_run(path, solver.split()[1], args.init, folder, args.timeout))
-            figures = {solver: summary(solver_runs) for solver, solver_runs in runs.items()}
+                        timed[solver].append(egnc_run(path, solver.split()[1], init, folder, timeout))
+            figures = {solver: summary(solver_runs) for solver, solver_runs in timed.items()}
         reference = figures.get("gtsam", {"failed": True})
         for solver, f in figures.items():
             if f.get("failed"):
-                print(f"| {poses} | {edges} | {solver} | not finished after {f['wall_s']:.0f} s | | | | | | | |")
+                print(f"| {count} | {edges} | {solver} | not finished after {f['wall_s']:.0f} s | | | | | | | |")
                 continue
             ratios = " | |"
             if solver != "gtsam" and not reference.get("failed"):
                 ratios = f" {f['wall_s'] / reference['wall_s']:.2f} | {f['solve_s'] / reference['solve_s']:.2f} |"
             print(
-                f"| {poses} | {edges} | {solver} | {f['wall_s']:.2f} | {f['solve_s']:.2f} | {f['mib']:.0f}"
+                f"| {count} | {edges} | {solver} | {f['wall_s']:.2f} | {f['solve_s']:.2f} | {f['mib']:.0f}"
                 f" | {f['cost']:.6g} | {f['iterations']} | {'yes' if f['converged'] else 'no'} |{ratios}",
                 flush=True,
             )
 
-
-if __name__ == "__main__":
-    main()

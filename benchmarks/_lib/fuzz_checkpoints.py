@@ -9,7 +9,7 @@ edge index out of range; a setting dropped or given a junk value; settings that 
 
 Loading must end in an `EgncError` with a one-line message naming the file, or give a solver that
 takes one more pose and odometry edge, updates and returns a result with finite poses (or an
-`EgncError`), all within `fuzz.TIME_LIMIT_S`. Anything else is a bug: another exception from
+`EgncError`), all within `fuzz_core.TIME_LIMIT_S`. Anything else is a bug: another exception from
 loading or after it ("crash"; NumPy's `IndexError`, `KeyError`, `zipfile.BadZipFile` ...), a
 hang, a multi-line message, a message without the file's name, or non-finite poses.
 
@@ -25,13 +25,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import fuzz
 import numpy as np
 
 from egnc.errors import EgncError
 from egnc.io import read_g2o
 from egnc.online import OnlineSolver
 from egnc.online.replay import replay
+
+from .fuzz_core import TIME_LIMIT_S, Hang, outcomes_table, time_limit
+from .paths import SHIPPED_DATASETS
 
 CLASSES = ("clean error", "resumed", "message without the file", "multi-line message", "non-finite result",
            "crash", "hang")  # fmt: skip
@@ -55,7 +57,7 @@ def base_checkpoints(folder: Path) -> dict[int, bytes]:
     checkpoints = {}
     for dim, name in ((2, "grid2d_outliers.g2o"), (3, "grid3d_outliers.g2o")):
         path = folder / f"base{dim}.npz"
-        replay(read_g2o(fuzz.DATASETS / name).first_poses(POSES), "egnc", checkpoint=path)
+        replay(read_g2o(SHIPPED_DATASETS / name).first_poses(POSES), "egnc", checkpoint=path)
         checkpoints[dim] = path.read_bytes()
     return checkpoints
 
@@ -137,7 +139,7 @@ OPERATORS: dict[str, Callable[[bytes, random.Random], bytes]] = {
     "cut short": lambda blob, rng: blob[: rng.randrange(len(blob))],
     "bytes overwritten": _with_bytes,
     "empty": lambda blob, rng: b"",
-    "a g2o file": lambda blob, rng: (fuzz.DATASETS / "grid2d.g2o").read_bytes()[:2000],
+    "a g2o file": lambda blob, rng: (SHIPPED_DATASETS / "grid2d.g2o").read_bytes()[:2000],
     "an array changed": lambda blob, rng: _changed_array(*_entries(blob), rng),
     "wrong values": lambda blob, rng: _broken_values(*_entries(blob), rng),
     "a setting changed": lambda blob, rng: _changed_setting(*_entries(blob), rng),
@@ -150,7 +152,7 @@ OPERATORS: dict[str, Callable[[bytes, random.Random], bytes]] = {
 def run_case(path: Path) -> str:
     """Load the checkpoint at `path`, and resume one update from it; classify what happened."""
     try:
-        with fuzz.time_limit(fuzz.TIME_LIMIT_S):
+        with time_limit(TIME_LIMIT_S):
             try:
                 solver, _ = OnlineSolver.load(path)
             except EgncError as error:
@@ -159,7 +161,7 @@ def run_case(path: Path) -> str:
                     return "multi-line message"
                 return "clean error" if str(path) in message else "message without the file"
             return _resumed(solver)
-    except fuzz.Hang:
+    except Hang:
         return "hang"
     except Exception:  # noqa: BLE001 - the class of failure is the finding
         return "crash"
@@ -198,7 +200,7 @@ def fuzz_checkpoints(cases: int, seed: int, folder: Path) -> list[CheckpointCase
 
 def table(results: list[CheckpointCase]) -> str:
     """Markdown: per operator, the cases by outcome class."""
-    return fuzz.outcomes_table(((case.operator, case.outcome) for case in results), CLASSES, "cases", "operator")
+    return outcomes_table(((case.operator, case.outcome) for case in results), CLASSES, "cases", "operator")
 
 
 def run_target(cases: int, seed: int) -> tuple[str, int]:
@@ -208,4 +210,3 @@ def run_target(cases: int, seed: int) -> tuple[str, int]:
     with tempfile.TemporaryDirectory() as folder:
         results = fuzz_checkpoints(cases, seed, Path(folder))
     return table(results), sum(case.outcome in BAD for case in results)
-

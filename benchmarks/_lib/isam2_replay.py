@@ -1,14 +1,14 @@
 """Replay a g2o pose graph pose by pose through GTSAM's ISAM2, with an estimate after every update.
 
-    python benchmarks/isam2_replay.py FILE.g2o [--relinearize-threshold 0.1] [--relinearize-skip 10]
+    python benchmarks/online.py isam2 FILE.g2o [--relinearize-threshold 0.1] [--relinearize-skip 10]
         [--reference] [--output ESTIMATE.g2o]
 
 The non-robust incremental baseline that `egnc-solve FILE --online` is timed against
-(`bench_online_vs_isam2.py`). The steps are those of `egnc.online.replay` (`egnc.online.replay.replay_steps`
-on the file read by `egnc.io.read_g2o`, odometry = consecutive ids): one `ISAM2.update` per new
-pose with its odometry, then its loop closures, in file order, followed by
-`calculateEstimate()`. The first update also holds the gauge, the prior of the reference
-protocol (`gtsam_baseline.load_g2o`: sigma 1e-3 on the lowest id, at its value in the file),
+(`online.py vs-isam2`, `online_vs_isam2`). The steps are those of `egnc.online.replay`
+(`egnc.online.replay.replay_steps` on the file read by `egnc.io.read_g2o`, odometry = consecutive
+ids): one `ISAM2.update` per new pose with its odometry, then its loop closures, in file order,
+followed by `calculateEstimate()`. The first update also holds the gauge, the prior of the reference
+protocol (`gtsam_lm.load_g2o`: sigma 1e-3 on the lowest id, at its value in the file),
 as egnc's replay adds its prior before the first update. A new pose's initial value is its
 odometry composed onto the current estimate of the other end (the file's vertex values are not
 used after the first pose). The factors are GTSAM's own (`gtsam.readG2o`); every one is checked
@@ -35,20 +35,19 @@ With `--output`, the final estimate is written as a g2o file (`gtsam.writeG2o`).
 
 from __future__ import annotations
 
-import argparse
 import importlib.metadata
 import json
 import resource
-import sys
 import time
 
 import gtsam
 import numpy as np
-from gtsam_baseline import lm_params, load_g2o, values_to_arrays
 
 from egnc.io import read_g2o
 from egnc.metrics import ate
 from egnc.online.replay import latency_summary, replay_steps
+
+from .gtsam_lm import lm_params, load_g2o, values_to_arrays
 
 
 def replay_isam2(path: str, relinearize_threshold: float, relinearize_skip: int) -> dict:
@@ -122,30 +121,20 @@ def replay_isam2(path: str, relinearize_threshold: float, relinearize_skip: int)
     }
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("file", help="a 2D or 3D g2o file with VERTEX lines")
-    parser.add_argument("--relinearize-threshold", type=float, default=0.1, help="ISAM2Params (GTSAM default 0.1)")
-    parser.add_argument("--relinearize-skip", type=int, default=10, help="ISAM2Params (GTSAM default 10)")
-    parser.add_argument("--reference", action="store_true", help="add lm_cost, lm_s and ate_vs_lm_m (untimed)")
-    parser.add_argument("--output", help="write the final estimate here (g2o)")
-    args = parser.parse_args(argv)
-
-    row = replay_isam2(args.file, args.relinearize_threshold, args.relinearize_skip)
+def report(file: str, relinearize_threshold: float, relinearize_skip: int, reference: bool, output: str | None) -> int:
+    """Replay `file` and print the JSON line of the module docstring; write the estimate to `output` if given."""
+    row = replay_isam2(file, relinearize_threshold, relinearize_skip)
     estimate, loaded = row.pop("estimate"), row.pop("loaded")
     row["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    if args.reference:
+    if reference:
         started = time.perf_counter()
         optimum = gtsam.LevenbergMarquardtOptimizer(loaded.graph, estimate, lm_params(1e-10, 1e-10, 100)).optimize()
         row["lm_s"] = time.perf_counter() - started
         row["lm_cost"] = loaded.graph.error(optimum)
         poses, optimal_poses = (values_to_arrays(values, loaded.is_3d)[1] for values in (estimate, optimum))
         row["ate_vs_lm_m"] = ate(poses, optimal_poses, 3 if loaded.is_3d else 2)
-    if args.output is not None:
-        gtsam.writeG2o(loaded.graph, estimate, args.output)
+    if output is not None:
+        gtsam.writeG2o(loaded.graph, estimate, output)
     print(json.dumps(row))
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

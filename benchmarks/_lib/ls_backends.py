@@ -1,6 +1,6 @@
 """Sparse SPD solvers on egnc's own normal equations: ordering and analysis once, then factor and solve.
 
-    python benchmarks/bench_linear_backends.py [--cases sphere2500,sphere2500-50,...]
+    python benchmarks/least_squares.py backends [--cases sphere2500,sphere2500-50,...]
         [--backends cholmod,scipy,...] [--repeat 5] [--budget 60]
 
 Every case is a graph (a shared file, or a generated grid `grid2d-10k`, `grid3d-100k`, ... from
@@ -43,11 +43,9 @@ package is missing):
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import pickle
-import subprocess
 import sys
 import tempfile
 import time
@@ -57,9 +55,9 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-DATASETS = Path(os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets"))
-DEFAULT_CASES = "sphere2500,sphere2500-50,manhattanOlson3500,city10000,grid2d-10k,grid2d-100k"
-DEFAULT_BACKENDS = "cholmod,scipy,superlu-unpostordered,superlu-mmd,superlu-colamd,cholespy,qdldl,rslab,pardiso,pyamg"
+from .paths import ENTRIES, SHARED_DATASETS
+from .processes import run_child as run_process
+
 PACKAGES = {
     "cholmod": "sksparse",
     "cholespy": "cholespy",
@@ -85,7 +83,7 @@ def make_graph(case: str):
         grid = grid_world(int(name[4]), int(name.split("-")[1].removesuffix("k")) * 1000, seed=1)
         graph, reference = grid.graph, grid.ground_truth
     else:
-        graph = read_g2o(DATASETS / f"{name}.g2o")
+        graph = read_g2o(SHARED_DATASETS / f"{name}.g2o")
         reference = solve(graph, "l2").graph.poses if percent else None
     if percent:
         graph = add_false_loops(graph, float(percent), seed=1, reference_poses=reference).graph
@@ -293,25 +291,18 @@ def run_case(case: str, backend: str, graph_file: str, repeat: int, budget: floa
     }
 
 
-def run_child(case: str, backend: str, graph_file: str, args: argparse.Namespace) -> dict | str:
+def run_child(case: str, backend: str, graph_file: str, repeat: int, budget: float) -> dict | str:
     """Run one row in a child process; its figures plus peak resident memory (MiB), or why it failed."""
-    command = [sys.executable, __file__, "--child", json.dumps([case, backend, graph_file, args.repeat, args.budget])]
+    child = json.dumps([case, backend, graph_file, repeat, budget])
+    command = [sys.executable, str(ENTRIES / "least_squares.py"), "backends", "--child", child]
     env = os.environ | {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    with tempfile.TemporaryFile("w+") as errors:
-        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=errors, text=True, env=env)
-        assert process.stdout is not None
-        output = process.stdout.read()
-        _, status, usage = os.wait4(process.pid, 0)
-        process.returncode = os.waitstatus_to_exitcode(status)
-        if process.returncode != 0:
-            errors.seek(0)
-            lines = errors.read().strip().splitlines()
-            return f"failed ({lines[-1] if lines else f'exit code {process.returncode}'})"
-    figures = json.loads(output.strip().splitlines()[-1])
-    figures["peak_mib"] = usage.ru_maxrss / 1024  # kilobytes on Linux
+    run = run_process(command, env=env)
+    if run.returncode != 0:
+        lines = run.stderr.strip().splitlines()
+        return f"failed ({lines[-1] if lines else f'exit code {run.returncode}'})"
+    figures = json.loads(run.stdout.strip().splitlines()[-1])
+    figures["peak_mib"] = run.peak_mib
     return figures
-
-
 
 
 def available(backend: str) -> bool:
@@ -322,22 +313,11 @@ def available(backend: str) -> bool:
     return package is None or importlib.util.find_spec(package) is not None
 
 
-def main() -> None:
-    """Parse arguments, prepare every case's graph once, run every row in a child, print the table."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--child", help=argparse.SUPPRESS)
-    parser.add_argument("--cases", default=DEFAULT_CASES)
-    parser.add_argument("--backends", default=DEFAULT_BACKENDS)
-    parser.add_argument("--repeat", type=int, default=5, help="numeric factorizations timed per row (median)")
-    parser.add_argument("--budget", type=float, default=60.0, help="stop repeating after this many seconds")
-    args = parser.parse_args()
-    if args.child:
-        case, backend, graph_file, repeat, budget = json.loads(args.child)
-        print(json.dumps(run_case(case, backend, graph_file, repeat, budget)))
-        return
-
-    backends = [b for b in args.backends.split(",") if available(b)]
-    skipped = [b for b in args.backends.split(",") if b not in backends]
+def run(cases: str, backends: str, repeat: int, budget: float) -> None:
+    """Prepare every case's graph once, run every (case, backend) row in a child, print the table."""
+    chosen = backends.split(",")
+    backends_run = [b for b in chosen if available(b)]
+    skipped = [b for b in chosen if b not in backends_run]
     from egnc.bench.report import installed_versions
 
     print(f"{time.strftime('%Y-%m-%d', time.gmtime())}; {installed_versions(DISTRIBUTIONS, show_absent=False)}")
@@ -349,13 +329,13 @@ def main() -> None:
     )
     print("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as folder:
-        for case in filter(None, args.cases.split(",")):
+        for case in filter(None, cases.split(",")):
             graph_file = str(Path(folder) / f"{case}.pickle")
             with open(graph_file, "wb") as stream:
                 pickle.dump(make_graph(case), stream)
             per_step: dict[str, float] = {}
-            for backend in backends:
-                f = run_child(case, backend, graph_file, args)
+            for backend in backends_run:
+                f = run_child(case, backend, graph_file, repeat, budget)
                 if isinstance(f, str):
                     print(f"| {case} | | | {backend} | {f} | | | | | | | | |", flush=True)
                     continue
@@ -370,6 +350,3 @@ def main() -> None:
                     flush=True,
                 )
 
-
-if __name__ == "__main__":
-    main()

@@ -11,7 +11,7 @@ unsorted, rows out of range, shapes wrong, a zero quaternion, NaN); and the onli
 a checkpoint or a load with junk arguments, and `egnc.online.replay.replay` with one junk argument.
 Each must end in an
 `EgncError` (egnc's argument errors, `OptionError`, are `TypeError`s or `ValueError`s too) with
-a one-line message, within `fuzz.TIME_LIMIT_S`; anything else is a bug: a `TypeError` or
+a one-line message, within `fuzz_core.TIME_LIMIT_S`; anything else is a bug: a `TypeError` or
 `ValueError` egnc did not raise itself ("foreign error": NumPy's words, naming no argument),
 another exception ("crash", e.g. an `AttributeError` from inside), a hang, a multi-line message,
 or a call that returns (a "converged" result counted apart).
@@ -27,7 +27,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import fuzz
 import numpy as np
 
 import egnc
@@ -36,6 +35,9 @@ from egnc.errors import EgncError
 from egnc.io import read_g2o, read_irl, write_g2o
 from egnc.online import OnlineOptions, OnlineSolver
 from egnc.online.replay import replay
+
+from .fuzz_core import TIME_LIMIT_S, Hang, outcomes_table, time_limit
+from .paths import SHIPPED_DATASETS
 
 JUNK: tuple[object, ...] = (
     None, 0, -1, 2.5, float("nan"), True, "", "x", b"bytes", [], [1, 2], {}, {"max_iterations": 5}, (None,),
@@ -54,7 +56,7 @@ class ApiCase:
 
 
 def _graph() -> egnc.PoseGraph:
-    graph = egnc.read_g2o(fuzz.DATASETS / "grid2d_outliers.g2o")
+    graph = egnc.read_g2o(SHIPPED_DATASETS / "grid2d_outliers.g2o")
     return graph.subgraph_edges((graph.edges < 20).all(axis=1)).with_poses(graph.poses)
 
 
@@ -103,7 +105,7 @@ def _broken_arrays(graph: egnc.PoseGraph, rng: random.Random) -> dict[str, objec
 
 
 def _graph3d_zero_quaternion(rng: random.Random) -> egnc.PoseGraph:
-    graph = egnc.read_g2o(fuzz.DATASETS / "grid3d.g2o")
+    graph = egnc.read_g2o(SHIPPED_DATASETS / "grid3d.g2o")
     measurements = np.array(graph.measurements)
     measurements[rng.randrange(graph.num_edges), 3:] = 0.0
     return dataclasses.replace(graph, measurements=measurements)
@@ -111,7 +113,7 @@ def _graph3d_zero_quaternion(rng: random.Random) -> egnc.PoseGraph:
 
 def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[str, Callable[[random.Random], object]]:
     """Misuse name -> a function of the random generator making one wrong call."""
-    path = fuzz.DATASETS / "grid2d.g2o"
+    path = SHIPPED_DATASETS / "grid2d.g2o"
     out = folder / "out.g2o"
     small = graph.first_poses(20)  # a replay needs every pose on an edge
     return {
@@ -245,9 +247,9 @@ def _fields(graph: egnc.PoseGraph) -> dict[str, object]:
 def run_case(call: Callable[[random.Random], object], rng: random.Random) -> str:
     """Make one wrong call and classify what happened."""
     try:
-        with fuzz.time_limit(fuzz.TIME_LIMIT_S):
+        with time_limit(TIME_LIMIT_S):
             returned = call(rng)
-    except fuzz.Hang:
+    except Hang:
         return "hang"
     except EgncError as error:
         return "clean error" if "\n" not in str(error) else "multi-line message"
@@ -270,7 +272,7 @@ def fuzz_api(cases: int, seed: int, folder: Path) -> list[ApiCase]:
 
 def table(results: list[ApiCase]) -> str:
     """Markdown: per misuse, the calls made by outcome class."""
-    return fuzz.outcomes_table(((case.kind, case.outcome) for case in results), CLASSES, "calls", "misuse")
+    return outcomes_table(((case.kind, case.outcome) for case in results), CLASSES, "calls", "misuse")
 
 
 def run_target(cases: int, seed: int) -> tuple[str, int]:

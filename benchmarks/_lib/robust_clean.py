@@ -1,6 +1,6 @@
 """Clean files first: the default robust solve against least squares on every shared dataset.
 
-`python benchmarks/bench_clean.py [--data-dir ../shared/datasets] [--files MIT,csail,...]`
+`python benchmarks/robust.py clean [--data-dir ../shared/datasets] [--files MIT,csail,...] [--gtsam-chordal]`
 
 A file without false loop closures is the first test of a robust solver: it must never be worse
 than least squares. For each file (cubicle needs `--information`, see its row) this prints the
@@ -13,7 +13,6 @@ files) for comparison.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -22,11 +21,6 @@ import numpy as np
 
 import egnc
 from egnc.metrics import ate
-
-FILES = (
-    "MIT,csail,intel,kitti_00,manhattanOlson3500,city10000,sphere2500,parking-garage,smallGrid3D,tinyGrid3D,sphere_a"
-)
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 
 
 def gtsam_chordal_cost(path: Path) -> float:
@@ -44,19 +38,14 @@ def gtsam_chordal_cost(path: Path) -> float:
     return float(graph.error(gtsam.LevenbergMarquardtOptimizer(graph, start, params).optimize()))
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Print the clean-file table in markdown."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data-dir", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--files", default=FILES, help="comma-separated dataset names (default: all but cubicle)")
-    parser.add_argument("--gtsam-chordal", action="store_true", help="add GTSAM's LM-from-chordal cost for 3D files")
-    args = parser.parse_args(argv)
+def run(data_dir: Path, files: str, gtsam_chordal: bool) -> int:
+    """Print the clean-file table of `files` (comma-separated names in `data_dir`) in markdown."""
     columns = ("file", "loops", "rejected", "rejected %", "ATE to l2 (m)", "cost egnc", "cost l2", "warnings")
     header = "| " + " | ".join(columns) + " | egnc (s) | l2 (s) |"
-    print(header + (" GTSAM LM from chordal |" if args.gtsam_chordal else ""))
-    print("|---|---:|---:|---:|---:|---:|---:|---|---:|---:|" + ("---:|" if args.gtsam_chordal else ""))
-    for name in args.files.split(","):
-        path = args.data_dir / f"{name}.g2o"
+    print(header + (" GTSAM LM from chordal |" if gtsam_chordal else ""))
+    print("|---|---:|---:|---:|---:|---:|---:|---|---:|---:|" + ("---:|" if gtsam_chordal else ""))
+    for name in files.split(","):
+        path = data_dir / f"{name}.g2o"
         if not path.is_file():
             print(f"skipping {name}: {path} not found", file=sys.stderr)
             continue
@@ -75,11 +64,8 @@ def main(argv: list[str] | None = None) -> int:
             f" {result.cost:.7g} | {least_squares.cost:.7g} | {'; '.join(result.warnings) or '-'} |"
             f" {egnc_s:.2f} | {l2_s:.2f} |"
         )
-        if args.gtsam_chordal:
+        if gtsam_chordal:
             row += f" {gtsam_chordal_cost(path):.7g} |" if graph.dim == 3 else " - |"
         print(row, flush=True)
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

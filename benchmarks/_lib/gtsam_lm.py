@@ -1,4 +1,4 @@
-"""GTSAM 4.3 baselines on g2o files: least-squares Levenberg-Marquardt and GNC-GM / GNC-TLS.
+"""GTSAM 4.3's least-squares baseline on g2o files: the reference protocol and its Levenberg-Marquardt.
 
 Benchmark-only module: it imports `gtsam` (the optional `bench` extra) and egnc never imports it.
 
@@ -19,43 +19,30 @@ tangent order is `(x, y, theta)` for Pose2 and `(rx, ry, rz, tx, ty, tz)` for Po
 permutes the g2o 6x6 information `(x, y, z, rx, ry, rz)` into that order without rescaling and
 normalizes quaternions.
 
-GNC runs (`run_gnc`) happen in a child process that is killed at a time limit, so a stuck GTSAM
-solve becomes a reported timeout instead of a hang.
-
-Run as a script: `python benchmarks/gtsam_baseline.py [files...]` prints a markdown table.
+`python benchmarks/least_squares.py reference [files...]` prints the table (`report_lm`); GTSAM's
+GNC on the same graphs is `gtsam_gnc`.
 
 References:
-- GTSAM 4.3, `gtsam/nonlinear/LevenbergMarquardtOptimizer.cpp`, `GncOptimizer.h`.
-- Yang, Antonante, Tzoumas, Carlone, "Graduated Non-Convexity for Robust Spatial Perception",
-  RA-L 2020.
+- GTSAM 4.3, `gtsam/nonlinear/LevenbergMarquardtOptimizer.cpp`.
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime
-import multiprocessing
 import os
 import platform
 import statistics
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import gtsam
 import numpy as np
 
 from egnc.bench import GTSAM_PRIOR_SIGMA, add_gtsam_reference_prior
 
-# `../shared/datasets` beside the checkout (see that folder's README); EGNC_DATASETS overrides.
-DATASETS_DIR = Path(
-    os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets")
-)
-
-
+from .paths import dataset_path
 
 # Final LM errors of the reference protocol. Kept as strings: the printed precision is the
 # tolerance of the match (see `matches_reference`).
@@ -69,9 +56,6 @@ REFERENCE_ERRORS: dict[str, str] = {
     "smallGrid3D": "517.9253324",
     "tinyGrid3D": "9.313909434",
 }
-
-GncKind = Literal["gm", "tls"]
-GncStatus = Literal["ok", "timeout", "error"]
 
 
 @dataclass(frozen=True)
@@ -105,38 +89,6 @@ class LmResult:
     optimize_times_s: tuple[float, ...]  # every repeat
     reference: float | None
     matches: bool | None  # None when the file has no reference value
-
-
-@dataclass(frozen=True)
-class GncResult:
-    """One GTSAM GNC solve, run in a child process under a time limit."""
-
-    path: str
-    kind: GncKind
-    status: GncStatus  # "timeout": killed at `time_limit_s`; "error": see `message`
-    message: str
-    time_limit_s: float
-    wall_time_s: float  # parent-side, includes process start and transfer
-    read_time_s: float | None
-    optimize_time_s: float | None  # `GncLMOptimizer.optimize()` alone
-    keys: np.ndarray | None  # `(N,)` int64, ascending
-    poses: np.ndarray | None  # `(N, 3)` x, y, theta or `(N, 7)` x, y, z, qx, qy, qz, qw (qw >= 0)
-    edge_keys: np.ndarray | None  # `(M, 2)` int64, (i, j) of each file edge, in file order
-    weights: np.ndarray | None  # `(M,)` final GNC weight of each file edge, in [0, 1]
-    prior_weight: float | None
-    known_inliers: np.ndarray | None  # factor indices passed to `setKnownInliers`
-    final_error: float | None  # unweighted graph.error(result), prior included
-
-
-def dataset_path(name_or_path: str | os.PathLike[str]) -> Path:
-    """Resolve a file path, or a bare dataset name such as `csail`, against `DATASETS_DIR`."""
-    path = Path(name_or_path)
-    if path.exists():
-        return path
-    for candidate in (DATASETS_DIR / path, DATASETS_DIR / f"{path}.g2o"):
-        if candidate.exists():
-            return candidate
-    raise FileNotFoundError(f"no such g2o file: {name_or_path} (also looked in {DATASETS_DIR})")
 
 
 def g2o_is_3d(path: str | os.PathLike[str]) -> bool:
@@ -232,7 +184,7 @@ def run_lm(
     """Solve a g2o file with GTSAM's LM under the reference protocol.
 
     Args:
-        path: g2o file, or a dataset name in `DATASETS_DIR`.
+        path: g2o file, or a dataset name in `paths.SHARED_DATASETS`.
         params: LM parameters; `lm_params()` when None.
         repeat: number of timed `optimize()` calls, each from the file's initial values; the
             reported time is their median and the error/iterations come from the last one.
@@ -286,125 +238,6 @@ def values_to_arrays(values: gtsam.Values, is_3d: bool) -> tuple[np.ndarray, np.
     return keys, poses
 
 
-def odometry_inliers(loaded: LoadedGraph) -> np.ndarray:
-    """Factor indices of the default known inliers: odometry edges (`j == i + 1`) and the prior."""
-    odometry = np.flatnonzero(loaded.edge_keys[:, 1] == loaded.edge_keys[:, 0] + 1)
-    return np.append(odometry, loaded.prior_index).astype(np.int64)
-
-
-def _gnc_params(
-    kind: GncKind, known_inliers: np.ndarray, base: Literal["default", "tight"]
-) -> gtsam.GncLMParams:
-    """GNC parameters: GTSAM defaults except the loss, the known inliers and the inner LM."""
-    inner = gtsam.LevenbergMarquardtParams() if base == "default" else lm_params()
-    params = gtsam.GncLMParams(inner)
-    params.setLossType({"gm": gtsam.GncLossType.GM, "tls": gtsam.GncLossType.TLS}[kind])
-    # setKnownInliers appends to the existing list; the params object is fresh here.
-    params.setKnownInliers([int(k) for k in known_inliers])
-    return params
-
-
-def _gnc_child(conn, path: str, kind: GncKind, known_inliers, base) -> None:
-    """Child-process body of `run_gnc`: solve and send one dict back through `conn`."""
-    try:
-        loaded = load_g2o(path)
-        inliers = odometry_inliers(loaded) if known_inliers is None else np.asarray(known_inliers)
-        optimizer = gtsam.GncLMOptimizer(
-            loaded.graph, loaded.initial, _gnc_params(kind, inliers, base)
-        )
-        start = time.perf_counter()
-        result = optimizer.optimize()
-        optimize_time_s = time.perf_counter() - start
-        weights = np.asarray(optimizer.getWeights(), dtype=float)
-        keys, poses = values_to_arrays(result, loaded.is_3d)
-        conn.send(
-            dict(
-                status="ok",
-                message="",
-                read_time_s=loaded.read_time_s,
-                optimize_time_s=optimize_time_s,
-                keys=keys,
-                poses=poses,
-                edge_keys=loaded.edge_keys,
-                weights=weights[: loaded.num_edges],
-                prior_weight=float(weights[loaded.prior_index]),
-                known_inliers=np.asarray(inliers, dtype=np.int64),
-                final_error=loaded.graph.error(result),
-            )
-        )
-    except Exception as exc:  # reported to the parent, never raised across the process boundary
-        conn.send(dict(status="error", message=f"{type(exc).__name__}: {exc}"))
-    finally:
-        conn.close()
-
-
-def run_gnc(
-    path: str | os.PathLike[str],
-    kind: GncKind = "gm",
-    time_limit_s: float = 600.0,
-    known_inliers: Sequence[int] | None = None,
-    base: Literal["default", "tight"] = "default",
-) -> GncResult:
-    """Solve a g2o file with `gtsam.GncLMOptimizer` in a child process killed at a time limit.
-
-    The graph is the reference protocol's (readG2o + prior, see `load_g2o`); GNC uses GTSAM's
-    defaults (inlier threshold 0.5 chi2(0.99, d) on the factor error, mu step 1.4).
-
-    Args:
-        path: g2o file, or a dataset name in `DATASETS_DIR`.
-        kind: "gm" (Geman-McClure) or "tls" (truncated least squares).
-        time_limit_s: wall-clock limit for the child (read + solve + transfer), seconds.
-        known_inliers: factor indices never reweighted; default odometry edges and the prior
-            (`odometry_inliers`). Edge k of the file is factor k, the prior is factor M.
-        base: inner LM parameters: GTSAM's defaults, or the reference protocol's `lm_params()`.
-    """
-    if kind not in ("gm", "tls"):
-        raise ValueError(f"kind must be 'gm' or 'tls', got {kind!r}")
-    path_str = str(dataset_path(path))
-    inliers = None if known_inliers is None else [int(k) for k in known_inliers]
-    # spawn: the child starts clean, whatever threads or GTSAM state the caller has.
-    context = multiprocessing.get_context("spawn")
-    receiver, sender = context.Pipe(duplex=False)
-    start = time.perf_counter()
-    process = context.Process(
-        target=_gnc_child, args=(sender, path_str, kind, inliers, base), daemon=True
-    )
-    process.start()
-    sender.close()  # so a child that dies without sending shows up as EOF
-    payload: dict = {}
-    try:
-        if receiver.poll(time_limit_s):
-            payload = receiver.recv()
-        else:
-            payload = dict(status="timeout", message=f"killed after {time_limit_s:g} s")
-    except EOFError:
-        process.join(5.0)
-        payload = dict(status="error", message=f"child exited with code {process.exitcode}")
-    finally:
-        if process.is_alive() and payload.get("status") != "ok":
-            process.kill()
-        process.join()
-        receiver.close()
-    wall_time_s = time.perf_counter() - start
-    return GncResult(
-        path=path_str,
-        kind=kind,
-        status=payload["status"],
-        message=payload.get("message", ""),
-        time_limit_s=time_limit_s,
-        wall_time_s=wall_time_s,
-        read_time_s=payload.get("read_time_s"),
-        optimize_time_s=payload.get("optimize_time_s"),
-        keys=payload.get("keys"),
-        poses=payload.get("poses"),
-        edge_keys=payload.get("edge_keys"),
-        weights=payload.get("weights"),
-        prior_weight=payload.get("prior_weight"),
-        known_inliers=payload.get("known_inliers"),
-        final_error=payload.get("final_error"),
-    )
-
-
 def format_lm_table(results: Sequence[LmResult | tuple[str, str]]) -> str:
     """Markdown table of LM results; a `(path, reason)` tuple is printed as a skipped row."""
     lines = [
@@ -426,68 +259,31 @@ def format_lm_table(results: Sequence[LmResult | tuple[str, str]]) -> str:
     return "\n".join(lines)
 
 
-def format_gnc_table(results: Sequence[GncResult]) -> str:
-    """Markdown table of GNC results: status, times, and how many loop closures were rejected."""
-    lines = [
-        "| file | kind | status | final error | loops | weight < 0.5 | optimize (s) | wall (s) |",
-        "|---|---|---|---:|---:|---:|---:|---:|",
-    ]
-    for res in results:
-        if res.status != "ok":
-            lines.append(
-                f"| {Path(res.path).name} | {res.kind} | {res.status}: {res.message} | | | "
-                f"| | {res.wall_time_s:.1f} |"
-            )
-            continue
-        loops = res.edge_keys[:, 1] != res.edge_keys[:, 0] + 1
-        rejected = int(np.count_nonzero(res.weights[loops] < 0.5))
-        lines.append(
-            f"| {Path(res.path).name} | {res.kind} | ok | {res.final_error:.10g} "
-            f"| {int(loops.sum())} | {rejected} | {res.optimize_time_s:.3f} "
-            f"| {res.wall_time_s:.1f} |"
-        )
-    return "\n".join(lines)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: LM table over files (default: every reference dataset), or GNC with --gnc."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "files", nargs="*", help="g2o files or dataset names (default: the reference datasets)"
-    )
-    parser.add_argument("--repeat", type=int, default=1, help="timed optimize() calls per file")
-    parser.add_argument(
-        "--tol", type=float, default=1e-12, help="LM relativeErrorTol = absoluteErrorTol"
-    )
-    parser.add_argument("--gnc", choices=["gm", "tls"], help="run GncLMOptimizer instead of LM")
-    parser.add_argument("--time-limit", type=float, default=600.0, help="GNC limit per file (s)")
-    args = parser.parse_args(argv)
-
-    files = args.files or list(REFERENCE_ERRORS)
-    stamp = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
-    print(f"`{' '.join(['python', 'benchmarks/gtsam_baseline.py', *(argv or sys.argv[1:])])}`")
-    print(
-        f"{stamp}, gtsam {_gtsam_version()}, Python {platform.python_version()}, "
-        f"{platform.machine()}, {os.cpu_count()} cpus\n"
-    )
-    if args.gnc:
-        results = [run_gnc(name, args.gnc, args.time_limit) for name in files]
-        print(format_gnc_table(results))
-        return 0 if all(r.status == "ok" for r in results) else 1
-
+def report_lm(files: Sequence[str], repeat: int, tol: float, command: str) -> int:
+    """Print the LM table of `files` (every reference dataset when empty); 1 if a file misses its reference."""
     rows: list[LmResult | tuple[str, str]] = []
-    for name in files:
+    print(header(command))
+    for name in files or list(REFERENCE_ERRORS):
         try:
-            rows.append(run_lm(name, lm_params(args.tol, args.tol), repeat=args.repeat))
+            rows.append(run_lm(name, lm_params(tol, tol), repeat=repeat))
         except (ValueError, FileNotFoundError) as exc:
             rows.append((str(name), str(exc).splitlines()[0]))
     print(format_lm_table(rows))
     print(
-        f"\nLM: relativeErrorTol={args.tol:g}, absoluteErrorTol={args.tol:g}, maxIterations=1000, "
+        f"\nLM: relativeErrorTol={tol:g}, absoluteErrorTol={tol:g}, maxIterations=1000, "
         f"other GTSAM defaults; prior sigma {GTSAM_PRIOR_SIGMA:g} on the lowest id. "
-        f"optimize (s): median of {max(1, args.repeat)} run(s)."
+        f"optimize (s): median of {max(1, repeat)} run(s)."
     )
     return 0 if all(isinstance(r, tuple) or r.matches is not False for r in rows) else 1
+
+
+def header(command: str) -> str:
+    """The command in backticks, then the date, gtsam's version and the machine, and a blank line."""
+    stamp = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+    return (
+        f"`{command}`\n{stamp}, gtsam {_gtsam_version()}, Python {platform.python_version()}, "
+        f"{platform.machine()}, {os.cpu_count()} cpus\n"
+    )
 
 
 def _gtsam_version() -> str:
@@ -498,6 +294,3 @@ def _gtsam_version() -> str:
     except Exception:  # metadata missing in a source build
         return "unknown"
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,6 +1,6 @@
 """The cost of robustness: default robust solve time over the clean least-squares solve time.
 
-    python benchmarks/bench_robust_speed.py [--datasets manhattanOlson3500,sphere2500]
+    python benchmarks/robust_speed.py [--datasets manhattanOlson3500,sphere2500]
         [--percent 10,30,50] [--seeds 1] [--backends cholmod,scipy] [--direct] [--before]
         [--large] [--grid 100000,...] [--grid3d 50000,...] [--clean-init auto|file|chordal] [--repeats N]
         [--importtime]

@@ -1,6 +1,6 @@
 """Clean graphs from drifted guesses: the default against the guess-only default, GTSAM's GNC-TLS and LM.
 
-`python benchmarks/bench_drifted.py [--data-dir ../shared/datasets] [--extra FILE.g2o,...]`
+`python benchmarks/robust.py drifted [--data-dir ../shared/datasets] [--extra FILE.g2o,...]`
 
 A graph without false loops is the first test of a robust solver, and the file's guess should not
 decide its result. For every shared file as given, and for clean files whose guess is re-chained
@@ -25,7 +25,6 @@ from elsewhere (e.g. SE-Sync's data/torus3D.g2o and data/manhattan.g2o), solved 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -41,12 +40,6 @@ from egnc.nonlinear.initialize import initialize_poses
 from egnc.robust.gnc import START_OPTIONS, GncOptions
 from egnc.robust.kernels import chi2_quantile
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "datasets"
-SHARED = (
-    "MIT,csail,intel,kitti_00,manhattanOlson3500,city10000,sphere2500,sphere_a,parking-garage,cubicle,smallGrid3D,"
-    "tinyGrid3D"
-)
-DRIFTED = "manhattanOlson3500,intel,sphere2500,grid3d"
 NEEDS_REPAIR = {"cubicle": "nearest-pd"}
 """Shared files whose information matrices are not all positive definite, and the repair used."""
 
@@ -119,7 +112,7 @@ def load(data_dir: Path, name: str) -> PoseGraph:
 def cases(args: argparse.Namespace) -> list[tuple[str, PoseGraph]]:
     """`(name, graph)` of every row: shared files as given, their drifted variants, the extra files.
 
-    `args` needs `data_dir`, `files`, `drifted`, `heading`, `scaled`, `seeds` and `extra` (see `main`).
+    `args` needs `data_dir`, `files`, `drifted`, `heading`, `scaled`, `seeds` and `extra` (`robust.py drifted`).
     """
     rows = []
     for name in filter(None, args.files.split(",")):
@@ -135,19 +128,8 @@ def cases(args: argparse.Namespace) -> list[tuple[str, PoseGraph]]:
     return rows
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Print one markdown row per case as it finishes."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data-dir", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--files", default=SHARED, help="shared files solved from their own guess")
-    parser.add_argument("--drifted", default=DRIFTED, help="files (or grid3d) re-chained with drift")
-    parser.add_argument("--heading", default="0.1,0.3", help="heading noise levels, rad per step")
-    parser.add_argument("--scaled", default="10", help="translation noise levels, times each step's sigma")
-    parser.add_argument("--seeds", default="1,2")
-    parser.add_argument("--extra", default="", help="comma-separated g2o files from elsewhere")
-    parser.add_argument("--time-limit", type=float, default=300.0)
-    parser.add_argument("--no-gtsam", action="store_true")
-    args = parser.parse_args(argv)
+def run(args: argparse.Namespace) -> int:
+    """Print one markdown row per case as it finishes (`args`: the options of `robust.py drifted`)."""
     use_gtsam = gtsam_available() and not args.no_gtsam
     print(
         "| case | loops | egnc rejected | start | egnc cost / LS opt | guess only rejected | guess only cost / LS opt"
@@ -175,6 +157,3 @@ def main(argv: list[str] | None = None) -> int:
         )
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -8,7 +8,7 @@ specification, written independently of `egnc.graph.checks`:
 - a case with any invalid value must be refused at construction with an `EgncError`, `TypeError`
   or `ValueError` whose message names the field (else "accepted invalid", a bug);
 - a case with valid values only is solved on a small graph with a random method, within
-  `fuzz.TIME_LIMIT_S`: it must return finite numbers or an `EgncError` (else "crash", "hang"
+  `fuzz_core.TIME_LIMIT_S`: it must return finite numbers or an `EgncError` (else "crash", "hang"
   or "non-finite result").
 
 Run from `benchmarks/fuzz.py --target options`; `tests/test_fuzz.py` runs fewer cases.
@@ -21,12 +21,14 @@ import math
 import random
 from dataclasses import dataclass
 
-import fuzz
 import numpy as np
 
 import egnc
 from egnc.api import METHODS
 from egnc.errors import EgncError
+
+from .fuzz_core import TIME_LIMIT_S, Hang, counts_table, time_limit
+from .paths import SHIPPED_DATASETS
 
 VALID: dict[str, tuple[object, ...]] = {
     # SolverOptions; max_iterations and max_stages stay small so that a case takes milliseconds.
@@ -120,13 +122,13 @@ def run_case(fields: dict[str, object], invalid: bool, graph: egnc.PoseGraph, me
     solver = {name: value for name, value in fields.items() if name in SOLVER_FIELDS}
     gnc = {name: value for name, value in fields.items() if name not in SOLVER_FIELDS}
     try:
-        with fuzz.time_limit(fuzz.TIME_LIMIT_S):
+        with time_limit(TIME_LIMIT_S):
             options = egnc.SolverOptions(**solver)  # type: ignore[arg-type]
             gnc_options = egnc.GncOptions(**gnc)  # type: ignore[arg-type]
             if invalid:
                 return "accepted invalid"
             result = egnc.solve(graph, method, linear_solver="scipy", options=options, gnc_options=gnc_options)
-    except fuzz.Hang:
+    except Hang:
         return "hang"
     except (EgncError, TypeError, ValueError) as error:
         if not invalid:
@@ -152,7 +154,7 @@ def fuzz_options(cases: int, seed: int) -> list[OptionsCase]:
 
 
 def _small(name: str, poses: int = 30) -> egnc.PoseGraph:
-    graph = egnc.read_g2o(fuzz.DATASETS / name)
+    graph = egnc.read_g2o(SHIPPED_DATASETS / name)
     return graph.subgraph_edges((graph.edges < poses).all(axis=1)).with_poses(graph.poses)
 
 
@@ -164,7 +166,7 @@ def table(results: list[OptionsCase]) -> str:
             rows[row]["cases"] += 1
             rows[row]["with an invalid value"] += case.invalid
             rows[row][case.outcome] += 1
-    return fuzz.counts_table(rows, ["cases", "with an invalid value", *CLASSES], "field")
+    return counts_table(rows, ["cases", "with an invalid value", *CLASSES], "field")
 
 
 def run_target(cases: int, seed: int) -> tuple[str, int]:

@@ -1,6 +1,6 @@
 """The online solver on replayed logs: accuracy, total cost, and latency per update, egnc vs risam.
 
-    python benchmarks/bench_online.py [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
+    python benchmarks/online.py [replay] [--datasets csail,intel] [--percents 10,30,50] [--seed 0]
         [--methods egnc,risam] [--irl manhattan_noisy] [--stage-iterations N]
         [--regraduate reference|new] [--region-hops N] [--boundary-share S] [--strong-at-arrival] [--decide-at-arrival]
         [--rel-cost-tol TOL] [--linear-solver auto] [--repeats N]
@@ -46,11 +46,10 @@ import os
 import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-DATASETS = Path(os.environ.get("EGNC_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets"))
+from .paths import SHARED_DATASETS
 
 
 def run(graph, is_outlier, known, reference, method: str, args: argparse.Namespace) -> dict:
@@ -126,14 +125,14 @@ def cases(args: argparse.Namespace):
     from egnc.io import read_g2o, read_irl
 
     for name in filter(None, args.datasets.split(",")):
-        graph = read_g2o(DATASETS / f"{name}.g2o")
+        graph = read_g2o(SHARED_DATASETS / f"{name}.g2o")
         reference = solve(graph, "l2", linear_solver=args.linear_solver).graph.poses
         for percent in (float(p) for p in args.percents.split(",")):
             corrupted = add_false_loops(graph, percent, seed=args.seed, reference_poses=reference)
             g = corrupted.graph
             yield name, percent, g, corrupted.is_outlier, g.is_odometry, reference
     for name in filter(None, args.irl.split(",")):
-        log = read_irl(DATASETS / f"{name}.irl")
+        log = read_irl(SHARED_DATASETS / f"{name}.irl")
         clean = log.graph.subgraph_edges(~log.is_outlier)
         reference = solve(clean, "l2", linear_solver=args.linear_solver).graph.poses
         percent = 100.0 * log.is_outlier.sum() / max(1, (~log.is_odometry).sum())
@@ -162,31 +161,8 @@ HEADER = (
 )
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--datasets", default="csail,intel,manhattanOlson3500,sphere2500")
-    parser.add_argument("--percents", default="10,30,50")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--methods", default="egnc,risam")
-    parser.add_argument("--irl", default="manhattan_noisy", help="IRL logs (names in the datasets folder); '' for none")
-    parser.add_argument("--stage-iterations", type=int, default=1, help="0: every stage converges")
-    parser.add_argument(
-        "--region-hops", type=int, help="OnlineOptions.region_hops (default: its default); 0: the whole map"
-    )
-    parser.add_argument("--boundary-share", type=float, help="OnlineOptions.boundary_share (default: its default)")
-    parser.add_argument("--regraduate", default="reference", choices=("reference", "new"))
-    parser.add_argument("--strong-at-arrival", action="store_true", help="OnlineOptions(strong_at_arrival=True)")
-    parser.add_argument("--decide-at-arrival", action="store_true", help="OnlineOptions(decide_at_arrival=True)")
-    parser.add_argument(
-        "--rel-cost-tol", type=float, help="OnlineOptions.rel_cost_tol (default: its default): where an update stops"
-    )
-    parser.add_argument("--linear-solver", default="auto")
-    parser.add_argument("--repeats", type=int, default=1, help="replays of each method per case, alternating")
-    parser.add_argument("--json", type=Path, help="append one JSON line per row here")
-    args = parser.parse_args()
-    if args.repeats < 1:
-        parser.error("--repeats must be at least 1")
-
+def report(args: argparse.Namespace) -> int:
+    """Replay every case with every method, print a markdown row per case and method (`args`: `online.py replay`)."""
     import egnc
 
     print(
@@ -224,6 +200,3 @@ def main() -> int:
                     out.write(json.dumps({"dataset": name, "percent": percent, "repeats": args.repeats, **row}) + "\n")
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())
