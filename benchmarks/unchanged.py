@@ -32,10 +32,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+from _lib.paths import SHARED_DATASETS
+from _lib.robust_drifted import drifted
 
 import egnc
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "datasets"
 SHARED = (
     "MIT",
     "csail",
@@ -59,32 +60,6 @@ NEEDS_REPAIR = {"cubicle": "nearest-pd"}
 def load(data_dir: Path, name: str) -> egnc.PoseGraph:
     """A shared file, repaired where `NEEDS_REPAIR` says."""
     return egnc.read_g2o(data_dir / f"{name}.g2o", information=NEEDS_REPAIR.get(name, "strict"))
-
-
-def drifted(graph: egnc.PoseGraph, kind: str, level: float, seed: int) -> egnc.PoseGraph:
-    """`graph` with its guess re-chained from odometry with extra seeded noise (as `bench_drifted` did)."""
-    from egnc.lie import so3
-    from egnc.nonlinear.factors import from_matrices, to_matrices
-    from egnc.nonlinear.initialize import initialize_poses
-
-    rng = np.random.default_rng(seed)
-    odometry = graph.is_odometry
-    dim = graph.dim
-    Z = to_matrices(dim, graph.measurements[odometry])
-    if kind == "heading":
-        if dim == 2:
-            angle = rng.normal(0.0, level, size=len(Z))
-            c, s = np.cos(angle), np.sin(angle)
-            noise = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-        else:
-            noise = so3.exp(rng.normal(0.0, level, size=(len(Z), 3)))
-        Z[:, :dim, :dim] = Z[:, :dim, :dim] @ noise
-    else:
-        sigma = np.sqrt(np.diagonal(np.linalg.inv(graph.information[odometry]), axis1=1, axis2=2))[:, :dim]
-        Z[:, :dim, dim] += level * sigma * rng.standard_normal((len(Z), dim))
-    known = np.arange(graph.num_poses) == 0
-    poses = initialize_poses(dim, graph.edges[odometry], from_matrices(dim, Z), poses=graph.poses, known=known)
-    return graph.with_poses(poses)
 
 
 def corrupted(graph: egnc.PoseGraph, reference: np.ndarray, percent: float, seed: int) -> egnc.PoseGraph:
@@ -212,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
     scan_parser = commands.add_parser("scan", help="fingerprint every case")
     scan_parser.add_argument("out", type=Path)
-    scan_parser.add_argument("--data-dir", type=Path, default=DEFAULT_DATA)
+    scan_parser.add_argument("--data-dir", type=Path, default=SHARED_DATASETS)
     scan_parser.add_argument("--only", default="", help="comma-separated file stems (default: all)")
     compare_parser = commands.add_parser("compare", help="compare two scans")
     compare_parser.add_argument("before", type=Path)
