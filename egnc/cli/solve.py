@@ -40,7 +40,7 @@ from egnc.linalg.linear_solvers import LINEAR_SOLVERS, resolve_name
 from egnc.linalg.step_solver import LINEAR_METHODS
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.online import ONLINE_METHODS, OnlineOptions
-from egnc.online.replay import CHECKPOINT_EVERY, latency_summary, replay
+from egnc.online.replay import CHECKPOINT_EVERY, replay
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in docs/cli.md)."""
@@ -283,7 +283,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
             print(f"hint: {hint}", file=sys.stderr, flush=True)
         read_count = len(caught)
         options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
-        online = None
+        outcome = None
         if args.online:
             online_options = OnlineOptions(decide_at_arrival=args.decide_at_arrival)
             if args.region_hops is not None:
@@ -302,13 +302,6 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
                 on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
             )
             result = outcome.result
-            online = {
-                "steps": outcome.steps,
-                "resumed_from": outcome.resumed_from,
-                "total_s": outcome.total_s,
-                "iterations": int(outcome.update_iterations.sum()),
-                "update_ms": latency_summary(outcome.update_ms),
-            }
         else:
             progress = None if args.quiet else Progress(sys.stderr)
             result = solve(
@@ -322,13 +315,11 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
                 on_iteration=None if progress is None else progress.on_iteration,
             )
     _require_finite(result, args.input)
-    report = report_dict(result, read_notes + _warning_notes(caught[read_count:]))
-    if online is not None:
-        report["online"] = online
+    report = report_dict(result, read_notes + _warning_notes(caught[read_count:]), outcome)
     _print_warnings(report["warnings"][len(read_notes) :])  # the solve's, the result's, the report's
     written, output_notes = plan.write(result, graph, report)
     _print_warnings(output_notes)
-    return result, written, online
+    return result, written, report.get("online")
 
 
 def _check_options(args: argparse.Namespace) -> None:
