@@ -69,7 +69,9 @@ def conforms(value: Any, kind: str) -> bool:
     if kind == "number or null" and value is None:
         return True
     types = {"integer": int, "number": (int, float), "number or null": (int, float), "string": str, "object": dict}
-    return isinstance(value, bool) if kind == "boolean" else isinstance(value, types[kind]) and not isinstance(value, bool)
+    if kind == "boolean":
+        return isinstance(value, bool)
+    return isinstance(value, types[kind]) and not isinstance(value, bool)
 
 
 def test_docs_list_exactly_the_fields_of_a_batch_and_an_online_report(reports):
@@ -102,5 +104,5 @@ def test_renamed_fields_keep_their_old_name_for_one_version(reports):
             assert report[old] == report[new] is not None
     docs = (REPO / "docs" / "cli.md").read_text(encoding="utf-8")
     for old, new in DEPRECATED_NAMES.items():
-        assert f"| `deprecated.{old}` | string | | `\"{new}\"` |" in docs
+        assert f'| `deprecated.{old}` | string | | `"{new}"` |' in docs
         assert f"| `{old}` | number | | deprecated since version 2, removed in 3: `{new}` |" in docs
