@@ -85,6 +85,15 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    _add_problem_arguments(parser)
+    _add_solver_arguments(parser)
+    _add_online_arguments(parser)
+    _add_output_arguments(parser)
+    return parser
+
+
+def _add_problem_arguments(parser: argparse.ArgumentParser) -> None:
+    """The input, the graph output, the method, the edges' roles and the initial guess."""
     parser.add_argument("input", type=Path, help="input pose graph (.g2o) or riSAM log (.irl)")
     parser.add_argument("-o", "--output", type=Path, help="write the optimized graph here (.g2o)")
     parser.add_argument(
@@ -118,6 +127,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="initial guess: the file's poses (default), the odometry composed from the first pose, or the"
         " chordal relaxation (better from a drifted guess, but distorted by false loop closures)",
     )
+
+
+def _add_solver_arguments(parser: argparse.ArgumentParser) -> None:
+    """The linear backend and method, the nonlinear solver, its iteration limit, and unknown g2o lines."""
     parser.add_argument(
         "--linear-solver",
         choices=LINEAR_SOLVERS,
@@ -140,6 +153,10 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip lines with g2o tags egnc does not read (landmarks, parameters, ...); -o writes them back unchanged",
     )
+
+
+def _add_online_arguments(parser: argparse.ArgumentParser) -> None:
+    """`--online` and the options of its replay: checkpoints, regions, decisions at arrival."""
     parser.add_argument(
         "--online",
         action="store_true",
@@ -182,6 +199,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --online and --method egnc: solve nothing for a loop update whose stages, predicted from the"
         " map factorized after the last solve, would end where it starts (docs/online.md)",
     )
+
+
+def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """The report, the figure, the trajectory and edge files, `--quiet` and `--version`."""
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument(
         "--plot",
@@ -212,7 +233,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success but warnings")
     parser.add_argument("--version", action="version", version=f"egnc {__version__}")
-    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
