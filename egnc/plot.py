@@ -143,6 +143,67 @@ def plot_trajectory(
         size = _figure_size(size)
     graph = result_or_graph if isinstance(result_or_graph, PoseGraph) else result_or_graph.graph
     result = None if isinstance(result_or_graph, PoseGraph) else result_or_graph
+    candidates, accepted, rejected = _loop_closure_masks(graph, result, inliers, known_inliers)
+
+    own_figure = ax is None
+    default_size = (7.0, 5.6) if graph.dim == 3 else (6.4, 6.0)
+    figure, ax = _single_axes(ax, three_d=graph.dim == 3, figsize=size or default_size)
+    if (ax.name == "3d") != (graph.dim == 3):
+        raise EgncError(f"a {graph.dim}D graph needs a {'3D' if graph.dim == 3 else '2D'} axes")
+    drawn = _draw_lines(ax, graph, result is not None, initial, reference, accepted, rejected)
+    _label_axes(ax, graph.dim, drawn)
+    if result is not None and not ax.get_title():
+        ax.set_title(f"{result.method}: rejected {int(rejected.sum())} of {int(candidates.sum())} loop closures")
+    _add_legend(figure, ax, own_figure)
+    return figure
+
+
+def _draw_lines(
+    ax: Axes,
+    graph: PoseGraph,
+    solved: bool,
+    initial: PoseGraph | np.ndarray | None,
+    reference: PoseGraph | np.ndarray | None,
+    accepted: np.ndarray,
+    rejected: np.ndarray,
+) -> np.ndarray:
+    """Draw `plot_trajectory`'s lines, bottom to top: accepted loops, guess, reference, trajectory,
+    rejected loops; `solved` names them as a result's. Returns the `(M, dim)` points drawn."""
+    position = _positions(graph, graph.poses, "result")
+    segments = np.stack([position[graph.edges[:, 0]], position[graph.edges[:, 1]]], axis=1)
+    _add_segments(
+        ax,
+        segments[accepted],
+        color=ACCEPTED_COLOR,
+        zorder=1,
+        label=f"accepted loop closures ({int(accepted.sum())})" if solved else "loop closures",
+        **crowd_style(int(accepted.sum())),
+    )
+    drawn = [position]
+    if initial is not None:
+        drawn.append(_positions(graph, initial, "initial"))
+        _draw_path(ax, drawn[-1], color=INITIAL_COLOR, linewidth=0.8, zorder=2, label="initial guess")
+    if reference is not None:
+        drawn.append(_positions(graph, reference, "reference"))
+        _draw_path(ax, drawn[-1], color=REFERENCE_COLOR, linewidth=1.0, linestyle=":", zorder=3, label="reference")
+    _draw_path(ax, position, color=RESULT_COLOR, linewidth=1.1, zorder=4, label="result" if solved else "trajectory")
+    if rejected.any():
+        _add_segments(
+            ax,
+            segments[rejected],
+            color=REJECTED_COLOR,
+            zorder=5,
+            label=f"rejected loop closures ({int(rejected.sum())})",
+            **crowd_style(int(rejected.sum())),
+        )
+    return np.concatenate(drawn)
+
+
+def _loop_closure_masks(
+    graph: PoseGraph, result: Result | None, inliers: np.ndarray | None, known_inliers: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`(candidates, accepted, rejected)`, `(E,)` bool each: the loop closures `plot_trajectory`
+    draws, from the given masks or else the result's (a bare graph: none rejected, odometry known)."""
     n_edges = graph.num_edges
     if inliers is None:
         inliers = result.inliers if result is not None else np.ones(n_edges, dtype=bool)
@@ -154,58 +215,23 @@ def plot_trajectory(
     # Accepted odometry would only retrace the trajectory line; rejected edges are always shown.
     accepted = candidates & inliers & graph.is_loop_closure
     rejected = candidates & ~inliers
+    return candidates, accepted, rejected
 
-    own_figure = ax is None
-    default_size = (7.0, 5.6) if graph.dim == 3 else (6.4, 6.0)
-    figure, ax = _single_axes(ax, three_d=graph.dim == 3, figsize=size or default_size)
-    if (ax.name == "3d") != (graph.dim == 3):
-        raise EgncError(f"a {graph.dim}D graph needs a {'3D' if graph.dim == 3 else '2D'} axes")
-    position = _positions(graph, graph.poses, "result")
-    segments = np.stack([position[graph.edges[:, 0]], position[graph.edges[:, 1]]], axis=1)
 
-    _add_segments(
-        ax,
-        segments[accepted],
-        color=ACCEPTED_COLOR,
-        zorder=1,
-        label=f"accepted loop closures ({int(accepted.sum())})" if result is not None else "loop closures",
-        **crowd_style(int(accepted.sum())),
-    )
-    drawn = [position]
-    if initial is not None:
-        drawn.append(_positions(graph, initial, "initial"))
-        _draw_path(ax, drawn[-1], color=INITIAL_COLOR, linewidth=0.8, zorder=2, label="initial guess")
-    if reference is not None:
-        drawn.append(_positions(graph, reference, "reference"))
-        _draw_path(ax, drawn[-1], color=REFERENCE_COLOR, linewidth=1.0, linestyle=":", zorder=3, label="reference")
-    _draw_path(
-        ax,
-        position,
-        color=RESULT_COLOR,
-        linewidth=1.1,
-        zorder=4,
-        label="result" if result is not None else "trajectory",
-    )
-    if rejected.any():
-        _add_segments(
-            ax,
-            segments[rejected],
-            color=REJECTED_COLOR,
-            zorder=5,
-            label=f"rejected loop closures ({int(rejected.sum())})",
-            **crowd_style(int(rejected.sum())),
-        )
-
+def _label_axes(ax: Axes, dim: int, drawn: np.ndarray) -> None:
+    """Name the axes in metres and give them an equal scale over the `(M, dim)` points `drawn`."""
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    if graph.dim == 3:
+    if dim == 3:
         ax3d = cast("Axes3D", ax)
         ax3d.set_zlabel("z [m]")
-        _equal_3d(ax3d, np.concatenate(drawn))
+        _equal_3d(ax3d, drawn)
     else:
         ax.set_aspect("equal", adjustable="datalim")
-    if result is not None and not ax.get_title():
-        ax.set_title(f"{result.method}: rejected {int(rejected.sum())} of {int(candidates.sum())} loop closures")
+
+
+def _add_legend(figure: Figure, ax: Axes, own_figure: bool) -> None:
+    """The legend: below the axes of a figure of our own, in a corner of the caller's axes."""
     if own_figure:  # below the axes, off the trajectory
         legend = figure.legend(loc="outside lower center", ncol=2, fontsize="small", frameon=False)
     else:  # an explicit corner: "best" scans every segment, which is slow on large graphs
@@ -214,7 +240,6 @@ def plot_trajectory(
         if handle is not None:
             handle.set_alpha(1.0)
             handle.set_linewidth(max(handle.get_linewidth(), 1.5))  # type: ignore[attr-defined]
-    return figure
 
 
 def crowd_style(count: int) -> dict[str, float]:
@@ -249,9 +274,16 @@ def plot_mu_stages(result: Result, *, axes: Sequence[Axes] | None = None) -> Fig
         EgncError: matplotlib is missing, or `axes` is not two axes.
     """
     require_matplotlib()
+    figure, (ax_stages, ax_hist) = _two_axes(axes, figsize=(9.0, 3.6))
+    _draw_mu_per_stage(ax_stages, result)
+    _draw_final_mu(ax_hist, result)
+    return figure
+
+
+def _draw_mu_per_stage(ax_stages: Axes, result: Result) -> None:
+    """`plot_mu_stages`' left panel: min, mean and max `mu` per stage, stages without one shaded."""
     from matplotlib.ticker import MaxNLocator
 
-    figure, (ax_stages, ax_hist) = _two_axes(axes, figsize=(9.0, 3.6))
     stages = result.stages
     number = np.arange(1, len(stages) + 1)
     low = np.array([stage.mu_min for stage in stages], dtype=float)
@@ -263,17 +295,8 @@ def plot_mu_stages(result: Result, *, axes: Sequence[Axes] | None = None) -> Fig
 
     for k in np.flatnonzero(~has_mu):
         ax_stages.axvspan(number[k] - 0.4, number[k] + 0.4, color="0.92", zorder=0)
-        ax_stages.text(
-            number[k],
-            0.5,
-            "least squares",
-            rotation=90,
-            ha="center",
-            va="center",
-            transform=ax_stages.get_xaxis_transform(),
-            fontsize="small",
-            color="0.4",
-        )
+        where: dict[str, Any] = {"transform": ax_stages.get_xaxis_transform(), "ha": "center", "va": "center"}
+        ax_stages.text(number[k], 0.5, "least squares", rotation=90, fontsize="small", color="0.4", **where)
     if has_mu.any():
         ax_stages.fill_between(
             number, low, high, where=has_mu, color=ACCEPTED_COLOR, alpha=0.35, linewidth=0, label="min to max"
@@ -283,14 +306,8 @@ def plot_mu_stages(result: Result, *, axes: Sequence[Axes] | None = None) -> Fig
         ax_stages.plot(number, low, "v", color=RESULT_COLOR, markersize=4, label="min")
         ax_stages.legend(loc="best", fontsize="small")
     else:
-        ax_stages.text(
-            0.5,
-            0.5,
-            f"method {result.method!r} has no kernel parameter mu",
-            ha="center",
-            va="center",
-            transform=ax_stages.transAxes,
-        )
+        message = f"method {result.method!r} has no kernel parameter mu"
+        ax_stages.text(0.5, 0.5, message, ha="center", va="center", transform=ax_stages.transAxes)
     if log_scale:
         ax_stages.set_yscale("log")
     else:
@@ -301,6 +318,9 @@ def plot_mu_stages(result: Result, *, axes: Sequence[Axes] | None = None) -> Fig
     ax_stages.set_ylabel(r"$\mu$ of the loop closures")
     ax_stages.set_title(rf"{result.method}: $\mu$ per stage")
 
+
+def _draw_final_mu(ax_hist: Axes, result: Result) -> None:
+    """`plot_mu_stages`' right panel: the histogram of the loop closures' final `mu`, accepted and rejected."""
     robust = ~result.known_inliers
     finite = robust & np.isfinite(result.mu)
     groups = [result.mu[finite & result.inliers], result.mu[finite & ~result.inliers]]
@@ -322,7 +342,6 @@ def plot_mu_stages(result: Result, *, axes: Sequence[Axes] | None = None) -> Fig
     ax_hist.set_xlabel(r"final $\mu$")
     ax_hist.set_ylabel("loop closures")
     ax_hist.set_title(r"final $\mu$ per loop closure")
-    return figure
 
 
 def plot_kernel(

@@ -325,3 +325,15 @@ def test_sigterm_ends_a_read_of_endless_input():
         producer.wait()
     assert solver.returncode == 143, stderr
     assert stderr.strip() == "egnc-solve: terminated (SIGTERM); no output written"
+
+
+def test_every_option_is_in_the_options_table_of_docs_cli():
+    """docs/cli.md says it lists every option; the --online ones were missing from it."""
+    from egnc.cli.solve import build_parser
+
+    docs = (Path(__file__).parents[1] / "docs" / "cli.md").read_text(encoding="utf-8")
+    table = docs.split("\n## Options\n", 1)[1].split("\n## ", 1)[0]
+    first_cells = [row.split("|")[1] for row in table.splitlines() if row.startswith("| `")]
+    documented = {option for cell in first_cells for option in re.findall(r"`(-[-\w]+)", cell)}
+    options = {option for action in build_parser()._actions for option in action.option_strings}
+    assert sorted(options - documented) == []

@@ -169,3 +169,20 @@ def test_integral_floats_are_accepted_as_ids():
     graph = chain()
     as_floats = dataclasses.replace(graph, edges=np.array(graph.edges, dtype=float))
     np.testing.assert_array_equal(as_floats.edges, graph.edges)
+
+
+def test_fixed_must_be_bools_or_zeros_and_ones_naming_the_first_that_is_not():
+    # NumPy turns None into False and 0.5 or 2 into True: a pose meant to be held (or not) was
+    # silently solved (or held).
+    bad = [
+        ([None, True, False, False], "element 0 is None"),
+        ([False, None, None, None], "element 1 is None"),
+        ([0.5, 0, 0, 0], "element 0 is 0.5"),
+        (["no", "", "", ""], "element 0 is 'no'"),
+        ([2, 0, 0, 0], "element 0 is 2"),
+    ]
+    for fixed, message in bad:
+        with pytest.raises(GraphError, match=rf"^fixed must be an array of bools \(True/False or 0/1\), {message}$"):
+            dataclasses.replace(chain(), fixed=fixed)
+    graph = dataclasses.replace(chain(), fixed=[0, 1, 0, 0.0])
+    np.testing.assert_array_equal(graph.fixed, [False, True, False, False])

@@ -2,17 +2,26 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
 import egnc.nonlinear.marginals as marginals_module
-from egnc.api import solve
+from egnc.api import marginal_covariances, solve
 from egnc.datasets import grid_world
-from egnc.linalg.linear_solvers import TriangularFactor, cholmod_available, make_linear_solver, rslab_available
+from egnc.errors import GraphError
+from egnc.linalg.linear_solvers import (
+    NotPositiveDefiniteError,
+    TriangularFactor,
+    cholmod_available,
+    make_linear_solver,
+    rslab_available,
+)
 from egnc.nonlinear.factors import BetweenFactors, to_matrices
 from egnc.nonlinear.least_squares import Problem
-from egnc.nonlinear.marginals import innovations, quadratic_form
+from egnc.nonlinear.marginals import innovations, pose_covariances, quadratic_form
 
 BACKENDS = [
     "scipy",
@@ -265,3 +274,33 @@ def test_the_reach_solve_on_a_supernodal_factor_equals_whole_solves(monkeypatch)
     steps = np.concatenate([[False], np.diff(np.diff(factor.lower.indptr)) == -1, [False]])
     assert np.max(np.diff(np.flatnonzero(~steps))) > 6  # panels wider than one pose
     np.testing.assert_allclose(on_reach, whole, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_poses_the_accepted_edges_cut_off_are_named_not_the_backends_failure(backend):
+    """Before, CHOLMOD's own "t_cholmod_rowfac.c:430: not positive definite" or SuperLU's "exactly singular"."""
+    graph = grid_world(2, 30, seed=1).graph
+    result = solve(graph, "l2", linear_solver=backend)
+    cut_off = np.isin(graph.edges, [4, 5]).any(axis=1)  # every edge of rows 4 and 5
+    apart = dataclasses.replace(result, inliers=result.inliers & ~cut_off)
+    with pytest.raises(
+        GraphError,
+        match=r"^marginal_covariances: the poses in rows \{4\.\.5\} of the graph \(2 of 30, in 2 parts of the graph\)"
+        r" have no path of accepted edges to a fixed pose, so they have no covariance; accept an edge joining them"
+        r" to the rest, or hold one pose of each part fixed$",
+    ):
+        marginal_covariances(apart)
+    problem = Problem.from_graph(graph.subgraph_edges(apart.inliers), backend)
+    with pytest.raises(GraphError, match=r"^marginal_covariances: poses \{104\.\.105\} \(2 of 30, in 2 parts"):
+        pose_covariances(problem, to_matrices(2, graph.poses), np.arange(3), vertex_ids=graph.vertex_ids + 100)
+    assert marginal_covariances(result, graph.vertex_ids[:6]).shape == (6, 3, 3)  # connected: as before
+
+
+def test_a_singular_information_is_reported_in_egncs_words(monkeypatch):
+    def singular(problem, poses):
+        raise NotPositiveDefiniteError("normal equations are not positive definite (t_cholmod_rowfac.c:430)")
+
+    monkeypatch.setattr(marginals_module, "covariance_solver", singular)
+    result = solve(grid_world(2, 10, seed=1).graph, "l2")
+    with pytest.raises(NotPositiveDefiniteError, match="^marginal_covariances: the information of the accepted"):
+        marginal_covariances(result)

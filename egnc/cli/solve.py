@@ -40,7 +40,7 @@ from egnc.linalg.linear_solvers import LINEAR_SOLVERS, resolve_name
 from egnc.linalg.step_solver import LINEAR_METHODS
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.online import ONLINE_METHODS, OnlineOptions
-from egnc.online.replay import CHECKPOINT_EVERY, latency_summary, replay
+from egnc.online.replay import CHECKPOINT_EVERY, replay
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in docs/cli.md)."""
@@ -85,6 +85,15 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    _add_problem_arguments(parser)
+    _add_solver_arguments(parser)
+    _add_online_arguments(parser)
+    _add_output_arguments(parser)
+    return parser
+
+
+def _add_problem_arguments(parser: argparse.ArgumentParser) -> None:
+    """The input, the graph output, the method, the edges' roles and the initial guess."""
     parser.add_argument("input", type=Path, help="input pose graph (.g2o) or riSAM log (.irl)")
     parser.add_argument("-o", "--output", type=Path, help="write the optimized graph here (.g2o)")
     parser.add_argument(
@@ -118,6 +127,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="initial guess: the file's poses (default), the odometry composed from the first pose, or the"
         " chordal relaxation (better from a drifted guess, but distorted by false loop closures)",
     )
+
+
+def _add_solver_arguments(parser: argparse.ArgumentParser) -> None:
+    """The linear backend and method, the nonlinear solver, its iteration limit, and unknown g2o lines."""
     parser.add_argument(
         "--linear-solver",
         choices=LINEAR_SOLVERS,
@@ -140,6 +153,10 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip lines with g2o tags egnc does not read (landmarks, parameters, ...); -o writes them back unchanged",
     )
+
+
+def _add_online_arguments(parser: argparse.ArgumentParser) -> None:
+    """`--online` and the options of its replay: checkpoints, regions, decisions at arrival."""
     parser.add_argument(
         "--online",
         action="store_true",
@@ -182,6 +199,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --online and --method egnc: solve nothing for a loop update whose stages, predicted from the"
         " map factorized after the last solve, would end where it starts (docs/online.md)",
     )
+
+
+def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """The report, the figure, the trajectory and edge files, `--quiet` and `--version`."""
     parser.add_argument("--report", type=Path, help="write a JSON report here")
     parser.add_argument(
         "--plot",
@@ -212,7 +233,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success but warnings")
     parser.add_argument("--version", action="version", version=f"egnc {__version__}")
-    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -283,7 +303,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
             print(f"hint: {hint}", file=sys.stderr, flush=True)
         read_count = len(caught)
         options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
-        online = None
+        outcome = None
         if args.online:
             online_options = OnlineOptions(decide_at_arrival=args.decide_at_arrival)
             if args.region_hops is not None:
@@ -302,13 +322,6 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
                 on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
             )
             result = outcome.result
-            online = {
-                "steps": outcome.steps,
-                "resumed_from": outcome.resumed_from,
-                "total_s": outcome.total_s,
-                "iterations": int(outcome.update_iterations.sum()),
-                "update_ms": latency_summary(outcome.update_ms),
-            }
         else:
             progress = None if args.quiet else Progress(sys.stderr)
             result = solve(
@@ -322,13 +335,11 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
                 on_iteration=None if progress is None else progress.on_iteration,
             )
     _require_finite(result, args.input)
-    report = report_dict(result, read_notes + _warning_notes(caught[read_count:]))
-    if online is not None:
-        report["online"] = online
+    report = report_dict(result, read_notes + _warning_notes(caught[read_count:]), outcome)
     _print_warnings(report["warnings"][len(read_notes) :])  # the solve's, the result's, the report's
     written, output_notes = plan.write(result, graph, report)
     _print_warnings(output_notes)
-    return result, written, online
+    return result, written, report.get("online")
 
 
 def _check_options(args: argparse.Namespace) -> None:

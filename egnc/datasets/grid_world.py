@@ -112,6 +112,36 @@ def grid_world(
     Raises:
         EgncError: an argument is out of range.
     """
+    _check_ranges(dim, num_poses, step, noise_scale, loop_probability, turn_probability, climb_probability)
+    d = TANGENT_SIZE[dim]
+    sigma_odometry = expand_sigmas(odometry_sigma, dim, "grid_world: odometry_sigma")
+    sigma_loop = expand_sigmas(loop_sigma, dim, "grid_world: loop_sigma")
+    size, levels = _extent(dim, num_poses, size, levels)
+
+    rng = np.random.default_rng(seed)
+    walk_draws = rng.random((num_poses, 3))
+    cells, headings, edges, is_loop = _walk(
+        walk_draws, size, levels, loop_probability, turn_probability, climb_probability if dim == 3 else 0.0
+    )
+    noise = rng.standard_normal((len(edges), d))
+
+    ground_truth = _ground_truth(dim, (cells - cells[0]) * float(step), headings)
+    sigma = np.where(is_loop[:, None], sigma_loop, sigma_odometry)
+    graph = _measured_graph(dim, ground_truth, edges, is_loop, noise * (noise_scale * sigma), sigma, decimals)
+    ground_truth.setflags(write=False)
+    return GridWorld(graph=graph, ground_truth=ground_truth)
+
+
+def _check_ranges(
+    dim: int,
+    num_poses: int,
+    step: float,
+    noise_scale: float,
+    loop_probability: float,
+    turn_probability: float,
+    climb_probability: float,
+) -> None:
+    """Refuse a dimension, size, step, noise scale or probability out of range (`EgncError`)."""
     if dim not in (2, 3):
         raise EgncError(f"grid_world: dim must be 2 or 3, got {dim}")
     if num_poses < 2:
@@ -127,9 +157,10 @@ def grid_world(
     ):
         if not 0.0 <= value <= 1.0:
             raise EgncError(f"grid_world: {name} must lie in [0, 1], got {value}")
-    d = TANGENT_SIZE[dim]
-    sigma_odometry = expand_sigmas(odometry_sigma, dim, "grid_world: odometry_sigma")
-    sigma_loop = expand_sigmas(loop_sigma, dim, "grid_world: loop_sigma")
+
+
+def _extent(dim: int, num_poses: int, size: int | None, levels: int | None) -> tuple[int, int]:
+    """`(size, levels)`: the grid's cells per side and floors, the defaults of `grid_world` where None."""
     if dim == 2:
         levels = 1
     elif levels is None:
@@ -140,40 +171,48 @@ def grid_world(
         size = max(2, round(math.sqrt(num_poses / levels)))
     elif size < 2:
         raise EgncError(f"grid_world: size must be at least 2, got {size}")
+    return size, levels
 
-    rng = np.random.default_rng(seed)
-    walk_draws = rng.random((num_poses, 3))
-    cells, headings, edges, is_loop = _walk(
-        walk_draws, size, levels, loop_probability, turn_probability, climb_probability if dim == 3 else 0.0
-    )
-    noise = rng.standard_normal((len(edges), d))
 
-    ground_truth = _ground_truth(dim, (cells - cells[0]) * float(step), headings)
+def _measured_graph(
+    dim: int,
+    ground_truth: np.ndarray,
+    edges: np.ndarray,
+    is_loop: np.ndarray,
+    noise: np.ndarray,
+    sigma: np.ndarray,
+    decimals: int | None,
+) -> PoseGraph:
+    """The graph of the walk: each edge's true relative pose times `Exp(noise)`, information
+    `diag(1 / sigma^2)`, and the noisy odometry chained from the first true pose as initial guess.
+
+    Args:
+        dim: 2 or 3.
+        ground_truth: `(N, P)` the true poses.
+        edges: `(E, 2)` the walk's edges; odometry `(k - 1, k)` for k = 1..N-1, in this order among them.
+        is_loop: `(E,)` bool, the loop closures.
+        noise: `(E, d)` the tangent noise drawn for each edge.
+        sigma: `(E, d)` the standard deviations the information says.
+        decimals: rounding of measurements, information and initial poses (None: none).
+    """
+    d = TANGENT_SIZE[dim]
     group = group_of(dim)
     T_world = to_matrices(dim, ground_truth)
     T_i_j = group.between(T_world[edges[:, 0]], T_world[edges[:, 1]])
-    sigma = np.where(is_loop[:, None], sigma_loop, sigma_odometry)
-    Z = group.compose(T_i_j, group.exp(noise * (noise_scale * sigma)))
-    measurements = rounded(from_matrices(dim, Z), decimals)
-
-    # Odometry edges are (k - 1, k) for k = 1..N-1, in this order among the edges.
+    measurements = rounded(from_matrices(dim, group.compose(T_i_j, group.exp(noise))), decimals)
     Z_odometry = to_matrices(dim, measurements[~is_loop])
     T_chain = _prefix_products(np.concatenate((T_world[:1], Z_odometry)))
-    poses = rounded(from_matrices(dim, T_chain), decimals)
-
     information = np.zeros((len(edges), d, d))
     # Rounded too: 1 / 0.05^2 is 399.99999999999994 in floating point, and files should say 400.
     information[:, np.arange(d), np.arange(d)] = rounded(1.0 / np.maximum(sigma, _MIN_SIGMA) ** 2, decimals)
-    graph = PoseGraph(
+    return PoseGraph(
         dim=dim,
-        vertex_ids=np.arange(num_poses, dtype=np.int64),
-        poses=poses,
+        vertex_ids=np.arange(len(ground_truth), dtype=np.int64),
+        poses=rounded(from_matrices(dim, T_chain), decimals),
         edges=edges,
         measurements=measurements,
         information=information,
     )
-    ground_truth.setflags(write=False)
-    return GridWorld(graph=graph, ground_truth=ground_truth)
 
 
 def expand_sigmas(value: Sequence[float], dim: int, name: str) -> np.ndarray:

@@ -167,16 +167,9 @@ def make_noisy_manhattan(
     """
     dim, d = graph.dim, graph.tangent_dim
     ground_truth = np.asarray(ground_truth, dtype=np.float64)
-    expected = (graph.num_poses, POSE_SIZE[dim])
-    if ground_truth.shape != expected:
-        raise EgncError(f"make_noisy_manhattan: ground_truth has shape {ground_truth.shape}, expected {expected}")
-    if not np.all(np.isfinite(ground_truth)):
-        raise EgncError("make_noisy_manhattan: ground_truth contains NaN or infinite values")
-    if not 0.0 <= outlier_fraction <= 1.0:
-        raise EgncError(f"make_noisy_manhattan: outlier_fraction must lie in [0, 1], got {outlier_fraction}")
-    sigma_odometry = expand_sigmas(odometry_sigma, dim, "make_noisy_manhattan: odometry_sigma")
-    sigma_loop = expand_sigmas(loop_sigma, dim, "make_noisy_manhattan: loop_sigma")
-    sigma_outlier = expand_sigmas(outlier_sigma, dim, "make_noisy_manhattan: outlier_sigma")
+    sigma_odometry, sigma_loop, sigma_outlier = _checked_arguments(
+        graph, ground_truth, odometry_sigma, loop_sigma, outlier_sigma, outlier_fraction
+    )
     is_odometry = graph.is_odometry
     loops = np.flatnonzero(~is_odometry)
     count = outlier_count(len(loops), outlier_fraction)
@@ -196,45 +189,125 @@ def make_noisy_manhattan(
     sigma = np.where(is_odometry[:, None], sigma_odometry, sigma_loop)
     measurements = rounded(from_matrices(dim, group.compose(T_i_j, group.exp(noise * sigma))), decimals)
 
-    # The outlier-free optimum, solved from the ground truth; the outliers' measurements do not enter it.
-    keep = ~is_outlier
+    reference = _outlier_free_optimum(graph, ground_truth, measurements, ~is_outlier)
+    T_reference = to_matrices(dim, reference)
+    R_i_j = group.between(T_reference[graph.edges[:, 0]], T_reference[graph.edges[:, 1]])
+    threshold = chi2_quantile(ACCEPT_QUANTILE, d) if outlier_min_r2 is None else outlier_min_r2
+    outliers = _OutlierDraw(graph, T_i_j, R_i_j, sigma_outlier, threshold, decimals)
+    measurements[is_outlier] = outliers.draw(rng, np.flatnonzero(is_outlier))
+
+    ground_truth = ground_truth.copy()
+    for array in (is_outlier, ground_truth, reference):
+        array.setflags(write=False)
+    noisy = _with_odometry_guess(graph, ground_truth, measurements, decimals)
+    return NoisyGraph(graph=noisy, is_outlier=is_outlier, ground_truth=ground_truth, reference=reference)
+
+
+def _checked_arguments(
+    graph: PoseGraph,
+    ground_truth: np.ndarray,
+    odometry_sigma: Sequence[float],
+    loop_sigma: Sequence[float],
+    outlier_sigma: Sequence[float],
+    outlier_fraction: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Refuse a ground truth or a fraction that cannot apply; the three sigmas as `(d,)` arrays."""
+    expected = (graph.num_poses, POSE_SIZE[graph.dim])
+    if ground_truth.shape != expected:
+        raise EgncError(f"make_noisy_manhattan: ground_truth has shape {ground_truth.shape}, expected {expected}")
+    if not np.all(np.isfinite(ground_truth)):
+        raise EgncError("make_noisy_manhattan: ground_truth contains NaN or infinite values")
+    if not 0.0 <= outlier_fraction <= 1.0:
+        raise EgncError(f"make_noisy_manhattan: outlier_fraction must lie in [0, 1], got {outlier_fraction}")
+    return (
+        expand_sigmas(odometry_sigma, graph.dim, "make_noisy_manhattan: odometry_sigma"),
+        expand_sigmas(loop_sigma, graph.dim, "make_noisy_manhattan: loop_sigma"),
+        expand_sigmas(outlier_sigma, graph.dim, "make_noisy_manhattan: outlier_sigma"),
+    )
+
+
+def _outlier_free_optimum(
+    graph: PoseGraph, ground_truth: np.ndarray, measurements: np.ndarray, keep: np.ndarray
+) -> np.ndarray:
+    """`(N, P)` the least-squares optimum of the `keep` edges `(E,)`, solved from the ground truth.
+
+    The outliers' measurements do not enter it, so it is solved before they are drawn.
+    """
     outlier_free = PoseGraph(
-        dim, graph.vertex_ids, ground_truth, graph.edges[keep], measurements[keep], graph.information[keep], graph.fixed
+        graph.dim,
+        graph.vertex_ids,
+        ground_truth,
+        graph.edges[keep],
+        measurements[keep],
+        graph.information[keep],
+        graph.fixed,
     )
     solved = solve(outlier_free, "l2", linear_solver="scipy")
     if not solved.converged:
         raise EgncError(f"make_noisy_manhattan: the outlier-free least-squares solve failed: {solved.message}")
-    reference = solved.graph.poses
-    T_reference = to_matrices(dim, reference)
-    R_i_j = group.between(T_reference[graph.edges[:, 0]], T_reference[graph.edges[:, 1]])
+    return solved.graph.poses
 
-    pending = np.flatnonzero(is_outlier)
-    threshold = chi2_quantile(ACCEPT_QUANTILE, d) if outlier_min_r2 is None else outlier_min_r2
-    for _ in range(_MAX_ROUNDS):
-        if len(pending) == 0:
-            break
-        perturbation = rng.standard_normal((len(pending), d)) * sigma_outlier
-        candidates = rounded(from_matrices(dim, group.compose(T_i_j[pending], group.exp(perturbation))), decimals)
-        Z_inverse = group.inverse(to_matrices(dim, candidates))
-        information = graph.information[pending]
-        accept = np.ones(len(pending), dtype=bool)
-        for T_pairs in (T_i_j[pending], R_i_j[pending]):  # at the ground truth, at the optimum
-            e = group.log(group.compose(Z_inverse, T_pairs))
-            accept &= np.einsum("ki,kij,kj->k", e, information, e) > threshold
-        measurements[pending[accept]] = candidates[accept]
-        pending = pending[~accept]
-    if len(pending):
-        raise EgncError(
-            f"make_noisy_manhattan: {len(pending)} outlier draws still pass as inliers after {_MAX_ROUNDS} "
-            f"rounds: outlier_sigma {sigma_outlier.tolist()} is too small for the information matrices"
-        )
 
-    # The initial guess: the ground-truth first pose, then the noisy odometry composed from it.
+@dataclass(frozen=True, eq=False)
+class _OutlierDraw:
+    """Draws outlier measurements until each is an outlier at the ground truth and at the optimum.
+
+    Attributes:
+        graph: the source graph (edges, information).
+        T_i_j: `(E, n, n)` each edge's relative pose at the ground truth.
+        R_i_j: `(E, n, n)` the same at the outlier-free optimum.
+        sigma: `(d,)` standard deviations of the perturbation.
+        threshold: the squared whitened error an outlier must exceed at both.
+        decimals: rounding of the measurements (the test is made on the rounded one).
+    """
+
+    graph: PoseGraph
+    T_i_j: np.ndarray
+    R_i_j: np.ndarray
+    sigma: np.ndarray
+    threshold: float
+    decimals: int | None
+
+    def draw(self, rng: np.random.Generator, edges: np.ndarray) -> np.ndarray:
+        """`(K, P)` outlier measurements of `edges` `(K,)`, redrawing the rejected ones in rounds."""
+        dim, d = self.graph.dim, self.graph.tangent_dim
+        group = group_of(dim)
+        measurements = np.zeros((len(edges), POSE_SIZE[dim]))
+        pending = np.arange(len(edges))
+        for _ in range(_MAX_ROUNDS):
+            if len(pending) == 0:
+                break
+            perturbation = rng.standard_normal((len(pending), d)) * self.sigma
+            T_pending = self.T_i_j[edges[pending]]
+            candidates = rounded(from_matrices(dim, group.compose(T_pending, group.exp(perturbation))), self.decimals)
+            Z_inverse = group.inverse(to_matrices(dim, candidates))
+            information = self.graph.information[edges[pending]]
+            accept = np.ones(len(pending), dtype=bool)
+            for T_pairs in (T_pending, self.R_i_j[edges[pending]]):  # at the ground truth, at the optimum
+                e = group.log(group.compose(Z_inverse, T_pairs))
+                accept &= np.einsum("ki,kij,kj->k", e, information, e) > self.threshold
+            measurements[pending[accept]] = candidates[accept]
+            pending = pending[~accept]
+        if len(pending):
+            raise EgncError(
+                f"make_noisy_manhattan: {len(pending)} outlier draws still pass as inliers after {_MAX_ROUNDS} "
+                f"rounds: outlier_sigma {self.sigma.tolist()} is too small for the information matrices"
+            )
+        return measurements
+
+
+def _with_odometry_guess(
+    graph: PoseGraph, ground_truth: np.ndarray, measurements: np.ndarray, decimals: int | None
+) -> PoseGraph:
+    """`graph` with `measurements`, its initial guess the noisy odometry composed from the ground-truth first pose."""
     known = np.zeros(graph.num_poses, dtype=bool)
     known[0] = True
-    poses = initialize_poses(dim, graph.edges[is_odometry], measurements[is_odometry], poses=ground_truth, known=known)
-    noisy = PoseGraph(
-        dim=dim,
+    is_odometry = graph.is_odometry
+    poses = initialize_poses(
+        graph.dim, graph.edges[is_odometry], measurements[is_odometry], poses=ground_truth, known=known
+    )
+    return PoseGraph(
+        dim=graph.dim,
         vertex_ids=graph.vertex_ids,
         poses=rounded(poses, decimals),
         edges=graph.edges,
@@ -243,7 +316,3 @@ def make_noisy_manhattan(
         fixed=graph.fixed,
         edge_lines=graph.edge_lines,
     )
-    ground_truth = ground_truth.copy()
-    for array in (is_outlier, ground_truth, reference):
-        array.setflags(write=False)
-    return NoisyGraph(graph=noisy, is_outlier=is_outlier, ground_truth=ground_truth, reference=reference)

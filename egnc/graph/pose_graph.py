@@ -60,13 +60,16 @@ def _private_copy(name: str, value: object, dtype: type) -> np.ndarray:
     """A read-only view of a new copy of `value` as `dtype`: its base is not the caller's array.
 
     Raises:
-        GraphError: `value` holds something other than numbers, or non-integers for an integer
-            field (NumPy would truncate 1.5 to 1 without a word).
+        GraphError: `value` holds something other than numbers, non-integers for an integer
+            field (NumPy would truncate 1.5 to 1 without a word), or for a bool field anything
+            but True/False or 0/1 (NumPy would take None for False and 0.5 for True).
     """
     try:
         source = np.asarray(value)
         if np.issubdtype(dtype, np.integer) and source.dtype.kind == "f" and not np.all(np.mod(source, 1) == 0):
             raise ValueError("not integers")
+        if dtype is bool and source.dtype.kind != "b" and not _zeros_and_ones(source):
+            raise GraphError(f"{name} must be an array of bools (True/False or 0/1), {_first_non_bool(source)}")
         copy: np.ndarray = np.array(source, dtype=dtype)
     except (TypeError, ValueError):
         kind = "integers" if np.issubdtype(dtype, np.integer) else "bools" if dtype is bool else "numbers"
@@ -75,6 +78,19 @@ def _private_copy(name: str, value: object, dtype: type) -> np.ndarray:
     view = copy.view()
     _OWNED[id(view)] = view
     return view
+
+
+def _zeros_and_ones(source: np.ndarray) -> bool:
+    """Whether a non-bool array holds only the numbers 0 and 1 (so `None`, `0.5`, `"no"` are not bools)."""
+    return source.dtype.kind in "iuf" and bool(np.all((source == 0) | (source == 1)))
+
+
+def _first_non_bool(source: np.ndarray) -> str:
+    """`"element k is X"` for the first element of `source` that is neither a bool nor 0 or 1."""
+    for k, item in enumerate(source.ravel().tolist()):
+        if not (isinstance(item, (bool, int, float)) and item in (0, 1)):
+            return f"element {k} is {describe(item)}"
+    return f"got {describe(source)}"  # not reached for an array `_zeros_and_ones` refused
 
 
 def _is_owned(value: object) -> bool:

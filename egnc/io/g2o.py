@@ -81,9 +81,7 @@ _VERTEX_TAGS = {
 }
 _EDGE_TAGS = {
     2: _Tag("EDGE_SE2", "edge", 2, 2, 3 + 6, "i j dx dy dtheta and 6 information entries"),
-    3: _Tag(
-        "EDGE_SE3:QUAT", "edge", 3, 2, 7 + 21, "i j dx dy dz qx qy qz qw and 21 information entries"
-    ),
+    3: _Tag("EDGE_SE3:QUAT", "edge", 3, 2, 7 + 21, "i j dx dy dz qx qy qz qw and 21 information entries"),
 }
 _TORO_TAGS = (
     _Tag("VERTEX2", "vertex", 2, 1, 3, "id x y theta", toro=True),
@@ -182,44 +180,15 @@ def read_g2o(
     check_bool("skip_unknown", skip_unknown)
     check_choice("information", information, INFORMATION_MODES)
     path = Path(path)
-    text = read_text(path)
-    lines = text.split("\n")
-    context = _Context(path, text, len(lines))
-    plain = _plain_tables(text, lines) if _NOT_PLAIN_TEXT.search(text) is None else None
-    if plain is None:
-        dim, vertex_records, edge_records, fixes, unknown = _split_records(lines, context, skip_unknown)
-        if dim is None or not edge_records.rows:
-            raise context.error(f"no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
-        vertices = _to_table(vertex_records, _VERTEX_TAGS[dim], context)
-        edges = _to_table(edge_records, _EDGE_TAGS[dim], context)
-    else:
-        (dim, vertices, edges, fixes), unknown = plain, []
-
+    dim, vertices, edges, fixes, unknown, context = _read_tables(path, skip_unknown)
     notes = [_describe_skipped(path, unknown)] if unknown else []
-    vertex_tag, edge_tag = _VERTEX_TAGS[dim], _EDGE_TAGS[dim]
-    vertex_ids, vertex_values, vertex_lines = vertices.ids[:, 0], vertices.values, vertices.lines
-    edge_ids, edge_values, edge_lines = edges.ids, edges.values, edges.lines
-    p, d = POSE_SIZE[dim], TANGENT_SIZE[dim]
-    measurements = edge_values[:, :p]
-    upper = edge_values[:, p:]
-    if edges.toro.any():
-        upper = upper.copy()
-        upper[edges.toro] = upper[edges.toro][:, _TORO_TO_G2O_UPPER]
-    information_matrices = _information_from_upper(upper, d)
-
-    _check_finite(vertices, vertex_tag, context)
-    _check_finite(edges, edge_tag, context)
-    if dim == 3:
-        _check_quaternions(vertex_values[:, 3:7], vertex_lines, context)
-        _check_quaternions(measurements[:, 3:7], edge_lines, context)
-    _check_unique_vertices(vertex_ids, vertex_lines, context)
-    _check_no_self_edges(edge_ids, edge_lines, context)
-    information_matrices, repair_note = _positive_definite(information_matrices, edge_lines, information, context)
+    measurements, information_matrices, repair_note = _checked_values(dim, vertices, edges, information, context)
     notes += [repair_note] if repair_note else []
 
-    all_ids = sorted_unique(np.concatenate((vertex_ids, edge_ids.ravel())))
+    vertex_ids = vertices.ids[:, 0]
+    all_ids = sorted_unique(np.concatenate((vertex_ids, edges.ids.ravel())))
     fixed = _fixed_mask(fixes, all_ids, context)
-    edge_rows = np.searchsorted(all_ids, edge_ids)
+    edge_rows = np.searchsorted(all_ids, edges.ids)
     isolated = isolated_vertices(len(all_ids), edge_rows)
     require_connected(all_ids, edge_rows, source=str(path), ignore=isolated)
     if isolated.any():
@@ -229,26 +198,15 @@ def read_g2o(
             f"{describe_ids(all_ids[isolated])}"
         )
 
-    poses = np.zeros((len(all_ids), p))
-    known = np.zeros(len(all_ids), dtype=bool)
-    vertex_rows = np.searchsorted(all_ids, vertex_ids)
-    poses[vertex_rows] = vertex_values
-    known[vertex_rows] = True
-    if not known.all():  # isolated vertices are known (they have VERTEX lines): initialize the rest
-        rows = np.flatnonzero(~isolated)
-        poses[rows] = initialize_poses(
-            dim, np.searchsorted(rows, edge_rows), measurements, poses=poses[rows], known=known[rows]
-        )
-
     graph = PoseGraph(
         dim=dim,
         vertex_ids=all_ids,
-        poses=poses,
+        poses=_initial_poses(dim, all_ids, vertices, edge_rows, measurements, isolated),
         edges=edge_rows,
         measurements=measurements,
         information=information_matrices,
         fixed=fixed,
-        edge_lines=edge_lines,
+        edge_lines=edges.lines,
         unknown_lines=tuple(unknown),
     )
     for note in notes:
@@ -256,9 +214,77 @@ def read_g2o(
     return graph
 
 
-def write_g2o(
-    graph: PoseGraph, path: str | os.PathLike, *, keep_edges: np.ndarray | None = None
-) -> None:
+def _read_tables(path: Path, skip_unknown: bool) -> tuple[int, _Table, _Table, _Records, list[str], _Context]:
+    """`(dim, vertices, edges, fixes, unknown lines, context)` of a g2o file, each record parsed.
+
+    Plain text takes the fast path (`egnc.io.plain_records`); anything else, and every error, the
+    line-by-line one that names the line.
+    """
+    text = read_text(path)
+    lines = text.split("\n")
+    context = _Context(path, text, len(lines))
+    plain = _plain_tables(text, lines) if _NOT_PLAIN_TEXT.search(text) is None else None
+    if plain is not None:
+        dim, vertices, edges, fixes = plain
+        return dim, vertices, edges, fixes, [], context
+    found, vertex_records, edge_records, fixes, unknown = _split_records(lines, context, skip_unknown)
+    if found is None or not edge_records.rows:
+        raise context.error(f"no EDGE_SE2, EDGE2 or EDGE_SE3:QUAT lines: {NO_EDGES}")
+    vertices = _to_table(vertex_records, _VERTEX_TAGS[found], context)
+    edges = _to_table(edge_records, _EDGE_TAGS[found], context)
+    return found, vertices, edges, fixes, unknown, context
+
+
+def _checked_values(
+    dim: int, vertices: _Table, edges: _Table, information: InformationMode, context: _Context
+) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """`(measurements (E, P), information (E, d, d), repair note)` of the edges, once every value is checked.
+
+    Checked in this order, the first failure raised: finite numbers, unit quaternions (3D),
+    unique vertex ids, no edge from a vertex to itself, positive-definite information (or its
+    repair, `information`).
+    """
+    p, d = POSE_SIZE[dim], TANGENT_SIZE[dim]
+    measurements = edges.values[:, :p]
+    upper = edges.values[:, p:]
+    if edges.toro.any():
+        upper = upper.copy()
+        upper[edges.toro] = upper[edges.toro][:, _TORO_TO_G2O_UPPER]
+    information_matrices = _information_from_upper(upper, d)
+    _check_finite(vertices, _VERTEX_TAGS[dim], context)
+    _check_finite(edges, _EDGE_TAGS[dim], context)
+    if dim == 3:
+        _check_quaternions(vertices.values[:, 3:7], vertices.lines, context)
+        _check_quaternions(measurements[:, 3:7], edges.lines, context)
+    _check_unique_vertices(vertices.ids[:, 0], vertices.lines, context)
+    _check_no_self_edges(edges.ids, edges.lines, context)
+    information_matrices, repair_note = _positive_definite(information_matrices, edges.lines, information, context)
+    return measurements, information_matrices, repair_note
+
+
+def _initial_poses(
+    dim: int,
+    all_ids: np.ndarray,
+    vertices: _Table,
+    edge_rows: np.ndarray,
+    measurements: np.ndarray,
+    isolated: np.ndarray,
+) -> np.ndarray:
+    """`(N, P)` the VERTEX lines' poses, and for vertices without one `initialize_poses`' guess."""
+    poses = np.zeros((len(all_ids), POSE_SIZE[dim]))
+    known = np.zeros(len(all_ids), dtype=bool)
+    vertex_rows = np.searchsorted(all_ids, vertices.ids[:, 0])
+    poses[vertex_rows] = vertices.values
+    known[vertex_rows] = True
+    if not known.all():  # isolated vertices are known (they have VERTEX lines): initialize the rest
+        rows = np.flatnonzero(~isolated)
+        poses[rows] = initialize_poses(
+            dim, np.searchsorted(rows, edge_rows), measurements, poses=poses[rows], known=known[rows]
+        )
+    return poses
+
+
+def write_g2o(graph: PoseGraph, path: str | os.PathLike, *, keep_edges: np.ndarray | None = None) -> None:
     """Write a graph as g2o text, atomically: the file is complete or untouched.
 
     Vertices are written in id order, then FIX lines, then `graph.unknown_lines` (landmarks,
@@ -341,8 +367,7 @@ def _split_records(
             continue
         if len(fields) - 1 != tag.num_fields:
             raise context.error(
-                f"{name} needs {tag.num_fields} fields after the tag ({tag.layout}), "
-                f"found {len(fields) - 1}",
+                f"{name} needs {tag.num_fields} fields after the tag ({tag.layout}), found {len(fields) - 1}",
                 line_number,
             )
         if tag.dim != dim:

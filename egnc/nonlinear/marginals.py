@@ -38,7 +38,15 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from egnc.linalg.linear_solvers import Factorization, TriangularFactor, exact_factor_pattern, serial_native_threads
+from egnc.errors import GraphError
+from egnc.graph.connectivity import connected_components, describe_ids
+from egnc.linalg.linear_solvers import (
+    Factorization,
+    NotPositiveDefiniteError,
+    TriangularFactor,
+    exact_factor_pattern,
+    serial_native_threads,
+)
 from egnc.linalg.normal_equations import NormalEquationsPattern
 from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import Problem
@@ -174,18 +182,65 @@ def _solved_columns(
         yield columns, covariance_solve(B[:, columns].toarray())
 
 
-def pose_covariances(problem: Problem, poses: np.ndarray, rows: np.ndarray) -> np.ndarray:
+def pose_covariances(
+    problem: Problem, poses: np.ndarray, rows: np.ndarray, vertex_ids: np.ndarray | None = None
+) -> np.ndarray:
     """`(K, d, d)` marginal covariances of the right-perturbation tangents of pose `rows` `(K,)`.
 
     Tangent order `[v, omega]` (translation first), as the residuals; fixed poses get zeros.
-    Solved in groups of columns so that memory stays bounded for many poses.
+    Solved in groups of columns so that memory stays bounded for many poses. `vertex_ids`:
+    `(N,)` the poses' ids, to name them in errors (None: by row).
+
+    Raises:
+        GraphError: the edges of `problem` leave some poses without a path to a fixed one
+            (`require_anchored`).
+        NotPositiveDefiniteError: `H` cannot be factorized for another reason (a degenerate solution).
     """
     rows = np.asarray(rows, dtype=np.int64)
     d = problem.tangent_dim
     if not problem.pattern.size:
         return np.zeros((len(rows), d, d))
+    require_anchored(problem, vertex_ids)
     B = transposed_jacobians(problem.pattern, rows[:, None], np.broadcast_to(np.eye(d), (len(rows), 1, d, d)))
-    return diagonal_blocks(B, covariance_solver(problem, poses), d)
+    try:
+        solver = covariance_solver(problem, poses)
+    except NotPositiveDefiniteError:
+        # The backend's own words (CHOLMOD's source line, SuperLU's "exactly singular") name no pose.
+        raise NotPositiveDefiniteError(
+            "marginal_covariances: the information of the accepted edges is singular at this solution, so the"
+            " poses have no covariance; check it for poses placed on top of one another or non-finite values"
+        ) from None
+    return diagonal_blocks(B, solver, d)
+
+
+def require_anchored(problem: Problem, vertex_ids: np.ndarray | None = None) -> None:
+    """Raise `GraphError` unless every pose joined by `problem`'s edges has a path to a fixed pose.
+
+    A pose without one (in a component of the edges holding no fixed pose, e.g. cut off by
+    rejected loop closures, or touched by no edge) can move freely: its information is singular
+    and it has no covariance. The gauge pose `Problem` fixes counts as fixed.
+
+    Args:
+        problem: the least-squares problem (`Problem.fixed` holds the gauge).
+        vertex_ids: `(N,)` the poses' ids, to name them (None: by row).
+    """
+    count, labels = connected_components(problem.num_poses, problem.factors.edges)
+    anchored = np.zeros(count, dtype=bool)
+    anchored[labels[problem.fixed]] = True
+    loose = np.flatnonzero(~anchored[labels])
+    if not len(loose):
+        return
+    named = (
+        f"poses {describe_ids(np.asarray(vertex_ids)[loose])}"
+        if vertex_ids is not None
+        else f"the poses in rows {describe_ids(loose)} of the graph"
+    )
+    components = int(np.count_nonzero(~anchored))
+    raise GraphError(
+        f"marginal_covariances: {named} ({len(loose)} of {problem.num_poses}, in {components} part"
+        f"{'s' if components != 1 else ''} of the graph) have no path of accepted edges to a fixed pose, so they"
+        " have no covariance; accept an edge joining them to the rest, or hold one pose of each part fixed"
+    )
 
 
 def relative_covariances(problem: Problem, poses: np.ndarray, loops: BetweenFactors) -> np.ndarray:
