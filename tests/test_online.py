@@ -10,7 +10,7 @@ import pytest
 from scipy.stats import chi2
 
 import egnc
-import egnc.online.solver
+import egnc.online.result
 from egnc.datasets import add_false_loops
 from egnc.errors import EgncError, GraphError, OptionError
 from egnc.io.labels import read_labels
@@ -241,8 +241,8 @@ def test_the_predicted_first_stage_is_the_solved_one(dim, linear_solver):
         runs[decide] = (solver, loop)
     solver, loop = runs[True]
     predicted = []
-    predict = solver._first_stage
-    solver._first_stage = lambda *args: predicted.append(predict(*args)) or predicted[-1]  # type: ignore[method-assign]
+    predict = solver._arrival.first_stage
+    solver._arrival.first_stage = lambda *args: predicted.append(predict(*args)) or predicted[-1]  # type: ignore[method-assign]
     assert not solver.update().decided_at_arrival
     first = predicted[0]
     assert first is not None
@@ -283,13 +283,13 @@ def test_the_predicted_last_stage_keeps_the_loops_the_solve_keeps(count, measure
     solver, information = _chain("egnc", decide_at_arrival=True)
     loops = [solver.add_loop(0, 10, [measured, 0.0, 0.0], information) for _ in range(count)]
     predicted = []
-    predict = solver._first_stage
-    solver._first_stage = lambda *args: predicted.append(predict(*args)) or predicted[-1]  # type: ignore[method-assign]
+    predict = solver._arrival.first_stage
+    solver._arrival.first_stage = lambda *args: predicted.append(predict(*args)) or predicted[-1]  # type: ignore[method-assign]
     report = solver.update()
     first = predicted[0]
     assert report.mu_history[:, 0].tolist() == [0.0, 1.0]  # strong after the first stage
     assert not report.decided_at_arrival
-    kernel = solver._kernel
+    kernel = solver._settings.kernel
     each = information[None].repeat(count, 0)
     settled = first.last_stage(each, lambda r: kernel.weight(r, np.ones_like(r)), first.residual_norms[loops])
     assert bool(np.all(settled**2 < 6.25)) == kept
@@ -404,7 +404,7 @@ def test_save_and_load_keep_every_number(tmp_path):
 
 
 def test_the_loop_indices_follow_the_loop_closures_through_growth_and_a_checkpoint(tmp_path):
-    # Updates test and reset the loops by their indices (OnlineSolver._loops): they must be
+    # Updates test and reset the loops by their indices (MapState.loops): they must be
     # exactly the loop closures, however edges arrive and after a load.
     solver, information = _chain("egnc")
     for k in range(10, 120):
@@ -412,15 +412,15 @@ def test_the_loop_indices_follow_the_loop_closures_through_growth_and_a_checkpoi
         if k % 7 == 0:
             solver.add_loops([[k + 1, k - 5], [k + 1, 3]], [[-6.0, 0.0, 0.0], [2.0, 1.0, 0.0]], [information] * 2)
         solver.update()
-        np.testing.assert_array_equal(solver._loops, np.flatnonzero(solver.is_loop_closure))
+        np.testing.assert_array_equal(solver._map.loops, np.flatnonzero(solver.is_loop_closure))
     solver.save(tmp_path / "s.npz")
     loaded, _ = OnlineSolver.load(tmp_path / "s.npz")
-    np.testing.assert_array_equal(loaded._loops, solver._loops)
+    np.testing.assert_array_equal(loaded._map.loops, solver._map.loops)
     for s in (solver, loaded):
         s.add_odometry(120, 121, [1.0, 0.0, 0.0], information)
         s.add_loop(121, 110, [11.0, 0.0, 0.0], information)
         s.update()
-    np.testing.assert_array_equal(loaded._loops, np.flatnonzero(loaded.is_loop_closure))
+    np.testing.assert_array_equal(loaded._map.loops, np.flatnonzero(loaded.is_loop_closure))
     np.testing.assert_array_equal(loaded.poses, solver.poses)
 
 
@@ -435,8 +435,8 @@ def test_a_loaded_solver_predicts_from_the_same_factorized_map(tmp_path):
     loaded, _ = OnlineSolver.load(tmp_path / "s.npz")
     predictions = []
     for s in (solver, loaded):
-        predict = s._first_stage
-        s._first_stage = lambda *args, predict=predict: predictions.append(predict(*args)) or predictions[-1]  # type: ignore[method-assign]
+        predict = s._arrival.first_stage
+        s._arrival.first_stage = lambda *args, predict=predict: predictions.append(predict(*args)) or predictions[-1]  # type: ignore[method-assign]
         s.add_loop(2, 13, [14.0, 0.0, 0.0], information)
         assert s.update().decided_at_arrival
     np.testing.assert_array_equal(predictions[0].residual_norms, predictions[1].residual_norms)
@@ -501,8 +501,8 @@ def test_odometry_updates_append_to_the_map_in_place():
     for k in range(10, 400):
         solver.add_odometry(k, k + 1, [1.0, 0.0, 0.001], information)
         assert solver.update().iterations == 0
-        buffers.add(solver._T.__array_interface__["data"][0])
-        assert np.shares_memory(solver._edges, solver._buffers["_edges"])
+        buffers.add(solver._map.T.__array_interface__["data"][0])
+        assert np.shares_memory(solver._map.edges, solver._map.buffers["edges"])
     # 390 updates, arrays grown by an eighth when full: a new buffer every few dozen updates.
     assert len(buffers) <= 30
     # The poses are those of the composed odometry: pose k turned 0.001 rad per step after pose 10.
@@ -570,7 +570,7 @@ def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
     false = solver.add_loop(0, 10, [7.0, 0.0, 0.0], information)
     true = solver.add_loop(0, 10, [10.0, 0.0, 0.0], information)
     solver.update()
-    factors, robust = solver._current_factors(), solver.is_loop_closure
+    factors, robust = solver._map.factors(), solver.is_loop_closure
     wrong = np.ones(solver.num_edges, dtype=bool)
     wrong[true] = False
     bent = solver.result(decide=False).graph.poses.copy()
@@ -579,7 +579,7 @@ def test_result_keeps_the_decision_of_lower_truncated_cost(monkeypatch):
     r = factors.whitened_norms(factors.residuals(bent_T))
     bent_cost = truncated_cost(r, robust, 3, solver.gnc_options.outlier_quantile)
     monkeypatch.setattr(
-        egnc.online.solver, "decide_outliers", lambda *args, **kwargs: Decision(bent_T, wrong, (), True, bent_cost)
+        egnc.online.result, "decide_outliers", lambda *args, **kwargs: Decision(bent_T, wrong, (), True, bent_cost)
     )
     result = solver.result()
     assert "batch solve" in result.message and result.start in ("guess", "chordal")
@@ -599,13 +599,13 @@ def test_result_keeps_the_online_decision_where_the_batch_one_is_lower_by_roundi
     false = solver.add_loop(0, 10, [7.0, 0.0, 0.0], information)
     solver.add_loop(0, 10, [10.0, 0.0, 0.0], information)
     solver.update()
-    decide = egnc.online.solver.decide_outliers
+    decide = egnc.online.result.decide_outliers
 
     def a_rounding_above(*args, **kwargs):
         decision = decide(*args, **kwargs)
         return replace(decision, truncated_cost=decision.truncated_cost * (1 + 1e-12))
 
-    monkeypatch.setattr(egnc.online.solver, "decide_outliers", a_rounding_above)
+    monkeypatch.setattr(egnc.online.result, "decide_outliers", a_rounding_above)
     kept = solver.result()
     assert kept.start == "online" and kept.rejected_edges.tolist() == [false]
 

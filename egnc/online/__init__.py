@@ -4,6 +4,8 @@ closure on a region around it, and `replay`, which feeds a whole graph to it pos
 Imports `egnc.api` and below.
 """
 
-from egnc.online.solver import ONLINE_METHODS, OnlineOptions, OnlineSolver, UpdateReport
+from egnc.online.options import ONLINE_METHODS, OnlineOptions
+from egnc.online.report import UpdateReport
+from egnc.online.solver import OnlineSolver
 
 __all__ = ["ONLINE_METHODS", "OnlineOptions", "OnlineSolver", "UpdateReport"]

@@ -135,43 +135,11 @@ def replay(
     """
     check_instance("graph", graph, PoseGraph)
     known = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)
-    check_int("checkpoint_every", checkpoint_every, 1)
-    if stop_after is not None:
-        check_int("stop_after", stop_after, 0)
-    if checkpoint is not None:
-        check_instance("checkpoint", checkpoint, (str, os.PathLike), "a file path")
-    check_callable("on_step", on_step)
-    touched = np.zeros(graph.num_poses, dtype=bool)
-    touched[graph.edges.ravel()] = True
-    if not touched.all():
-        raise GraphError(f"{int((~touched).sum())} poses no edge touches: a replay cannot place them")
+    _check_arguments(graph, checkpoint, checkpoint_every, stop_after, on_step)
     steps = replay_steps(graph, known)
-    settings = {
-        "fingerprint": fingerprint(graph, known),
-        "method": method,
-        # A resumed run keeps its checkpoint's options; one asked to solve otherwise is refused.
-        "region_hops": (online_options or OnlineOptions()).region_hops,
-        "decide_at_arrival": (online_options or OnlineOptions()).decide_at_arrival,
-        "boundary_share": (online_options or OnlineOptions()).boundary_share,
-    }
-    solver: OnlineSolver | None = None
-    done = 0
+    settings = _checkpoint_meta(graph, known, method, online_options or OnlineOptions())
     path = None if checkpoint is None else Path(checkpoint)
-    if path is not None and path.exists():
-        solver, meta = OnlineSolver.load(path)
-        # Checkpoints written before an option existed solved as its default does now.
-        defaults = {"decide_at_arrival": False, "boundary_share": OnlineOptions().boundary_share}
-        saved = {key: meta.get(key, defaults.get(key)) for key in settings}
-        if saved != settings:
-            differs = (
-                f"{key} {old!r} (this run: {settings[key]!r})" for key, old in saved.items() if old != settings[key]
-            )
-            same_graph = saved["fingerprint"] == settings["fingerprint"]
-            what = ", ".join(differs) if same_graph else "another graph or edge roles"
-            raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
-        done = solver.steps  # one update per step
-    elif path is not None:
-        check_writable(path)  # before the first steps, not at the first save
+    solver = _resumed(path, settings)
     if solver is None:
         solver = OnlineSolver(
             graph.dim,
@@ -182,7 +150,7 @@ def replay(
             online_options=online_options,
         )
         add_gauge(solver, graph)
-    resumed_from = done
+    done = resumed_from = solver.steps  # one update per step
     order = np.concatenate(steps) if steps else np.zeros(0, dtype=np.int64)
     last = len(steps) if stop_after is None else min(len(steps), stop_after)
     for step in range(done, last):
@@ -205,6 +173,58 @@ def replay(
         update_iterations=solver.update_iterations,
         total_s=1e-3 * float(update_ms.sum()),
     )
+
+
+def _check_arguments(
+    graph: PoseGraph,
+    checkpoint: str | Path | None,
+    checkpoint_every: int,
+    stop_after: int | None,
+    on_step: StepCallback | None,
+) -> None:
+    """Refuse `replay`'s arguments of the wrong kind, and a graph with a pose no edge touches."""
+    check_int("checkpoint_every", checkpoint_every, 1)
+    if stop_after is not None:
+        check_int("stop_after", stop_after, 0)
+    if checkpoint is not None:
+        check_instance("checkpoint", checkpoint, (str, os.PathLike), "a file path")
+    check_callable("on_step", on_step)
+    touched = np.zeros(graph.num_poses, dtype=bool)
+    touched[graph.edges.ravel()] = True
+    if not touched.all():
+        raise GraphError(f"{int((~touched).sum())} poses no edge touches: a replay cannot place them")
+
+
+def _checkpoint_meta(graph: PoseGraph, known: np.ndarray, method: str, online_options: OnlineOptions) -> dict:
+    """What a checkpoint of `replay` must have been written with to be resumed (`known`: `(E,)` roles)."""
+    return {
+        "fingerprint": fingerprint(graph, known),
+        "method": method,
+        # A resumed run keeps its checkpoint's options; one asked to solve otherwise is refused.
+        "region_hops": online_options.region_hops,
+        "decide_at_arrival": online_options.decide_at_arrival,
+        "boundary_share": online_options.boundary_share,
+    }
+
+
+def _resumed(path: Path | None, settings: dict) -> OnlineSolver | None:
+    """The solver of the checkpoint at `path` when it exists, refused unless it was written with
+    `settings` (`replay`'s checkpoint meta); None otherwise, once `path` (if any) is known writable."""
+    if path is None:
+        return None
+    if not path.exists():
+        check_writable(path)  # before the first steps, not at the first save
+        return None
+    solver, meta = OnlineSolver.load(path)
+    # Checkpoints written before an option existed solved as its default does now.
+    defaults = {"decide_at_arrival": False, "boundary_share": OnlineOptions().boundary_share}
+    saved = {key: meta.get(key, defaults.get(key)) for key in settings}
+    if saved != settings:
+        differs = (f"{key} {old!r} (this run: {settings[key]!r})" for key, old in saved.items() if old != settings[key])
+        same_graph = saved["fingerprint"] == settings["fingerprint"]
+        what = ", ".join(differs) if same_graph else "another graph or edge roles"
+        raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
+    return solver
 
 
 def _in_file_order(result: Result, inserted: np.ndarray, graph: PoseGraph) -> Result:

@@ -1,0 +1,226 @@
+"""The graph an online solver holds: poses, edges, their roles and `mu`, grown as entries arrive.
+
+Rows are in arrival order (a vertex id's row is fixed when the pose is taken in), edges in
+insertion order. Each array grows by appending rows into room kept at its end (`MapState.grow`),
+so an update that only extends the trajectory copies nothing of the map. A new pose is placed by
+composing the odometry that reaches it from the current estimate, so that edge starts at zero
+residual.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from egnc.errors import GraphError
+from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.nonlinear.factors import BetweenFactors, from_matrices, group_of, to_matrices
+from egnc.nonlinear.least_squares import Problem
+from egnc.online.intake import Pending
+from egnc.online.options import Settings
+from egnc.online.region import LocalProblem
+
+__all__ = ["MapState", "Saved"]
+
+
+@dataclass(frozen=True, eq=False)
+class Saved:
+    """The part of the estimate a solve may change, as it was before: a region's pose rows and
+    edges (its solves write into them), or the whole map's arrays (its solves replace them).
+
+    Attributes:
+        rows: `(M,)` pose rows, or None for every row.
+        T: `(M, n, n)` (or `(N, n, n)`) their poses.
+        edges: `(K,)` edges, or None for every edge.
+        r: `(K,)` (or `(E,)`) their whitened residual norms.
+    """
+
+    rows: np.ndarray | None
+    T: np.ndarray
+    edges: np.ndarray | None
+    r: np.ndarray
+
+
+class MapState:
+    """The online solver's graph and estimate.
+
+    Attributes:
+        settings: the solver's (`dim`; `linear_solver`, the backend of the problems built).
+        row: vertex id -> pose row.
+        vertex_ids: `(N,)` vertex id of each row.
+        T: `(N, n, n)` current estimate; `T_initial` the poses as placed at arrival.
+        gauge: the row held fixed (-1 before the first pose); `has_prior`: whether a prior set it.
+        edges: `(E, 2)` pose rows of each edge; `measurements` `(E, P)`, `Z_inv` `(E, n, n)` the
+            inverse measured transforms, `information` `(E, d, d)`.
+        robust: `(E,)` bool, loop closures; `loops`: `(L,)` their indices, increasing.
+        mu, mu_init: `(E,)` each loop's current `mu` and the `mu` its next graduation starts from.
+        r: `(E,)` whitened residual norms at the current estimate.
+        problem: the whole map's problem, built when first needed after the graph changed.
+        buffers: the arrays `grow` appends to, by attribute name, with room to spare.
+    """
+
+    def __init__(self, settings: Settings):
+        dim = settings.dim
+        n, d = dim + 1, TANGENT_SIZE[dim]
+        self.settings, self.dim = settings, dim
+        self.row: dict[int, int] = {}
+        self.vertex_ids = np.zeros(0, dtype=np.int64)
+        self.T = np.zeros((0, n, n))
+        self.T_initial = np.zeros((0, n, n))
+        self.gauge = -1
+        self.has_prior = False
+        self.edges = np.zeros((0, 2), dtype=np.int64)
+        self.measurements = np.zeros((0, POSE_SIZE[dim]))
+        self.Z_inv = np.zeros((0, n, n))
+        self.information = np.zeros((0, d, d))
+        self.robust = np.zeros(0, dtype=bool)
+        self.loops = np.zeros(0, dtype=np.int64)
+        self.mu = np.zeros(0)
+        self.mu_init = np.zeros(0)
+        self.r = np.zeros(0)
+        self.problem: Problem | None = None
+        self._factors: BetweenFactors | None = None
+        self.buffers: dict[str, np.ndarray] = {}
+
+    def integrate(self, pending: Pending) -> bool:
+        """Move the `pending` entries into the graph; place new poses. Returns whether the gauge moved."""
+        if not pending:
+            return False
+        group, P = group_of(self.dim), POSE_SIZE[self.dim]
+        for vertex_id in pending.pose_ids:
+            self.row[vertex_id] = len(self.row)
+        start = len(self.vertex_ids)
+        self.grow("vertex_ids", np.array(pending.pose_ids, dtype=np.int64))
+        if self.gauge < 0 and len(self.vertex_ids):
+            self.gauge = 0
+        Z = to_matrices(self.dim, np.array(pending.measurements).reshape(-1, P))
+        rows = np.array([[self.row[i], self.row[j]] for i, j in pending.edge_ids], dtype=np.int64).reshape(-1, 2)
+        robust = np.array(pending.robust, dtype=bool)
+        new_T = self._placed(pending, start, rows, Z, robust)
+        self.grow("T", new_T)
+        self.grow("T_initial", new_T)
+        self.grow("edges", rows)
+        self.grow("measurements", np.array(pending.measurements).reshape(len(rows), P))
+        self.grow("Z_inv", group.inverse(Z))
+        d = TANGENT_SIZE[self.dim]
+        self.grow("information", np.array(pending.information).reshape(len(rows), d, d))
+        self.grow("robust", robust)
+        self.grow("loops", len(self.robust) - len(robust) + np.flatnonzero(robust))
+        self.grow("mu", np.zeros(len(rows)))
+        self.grow("mu_init", np.zeros(len(rows)))
+        if len(rows) or len(pending.pose_ids):
+            self.problem = self._factors = None
+        if pending.prior is None:
+            return False
+        # The prior's pose becomes the gauge: move the map rigidly onto it (relative residuals unchanged).
+        row = self.row[pending.prior[0]]
+        target = to_matrices(self.dim, pending.prior[1])
+        self.T = target @ group.inverse(self.T[row]) @ self.T
+        self.gauge, self.has_prior = row, True
+        self.problem = None
+        return True
+
+    def _placed(self, pending: Pending, start: int, rows: np.ndarray, Z: np.ndarray, robust: np.ndarray) -> np.ndarray:
+        """`(K, n, n)` the new poses (rows from `start`): explicit values, the others composed
+        along the new odometry (`rows` `(M, 2)`, transforms `Z`, `robust` `(M,)`) in arrival order."""
+        n, group = self.dim + 1, group_of(self.dim)
+        new_T = np.zeros((len(pending.pose_ids), n, n))
+        placed = np.zeros(len(pending.pose_ids), dtype=bool)  # of the new poses; the others are placed
+        for k, value in enumerate(pending.pose_values):
+            if value is not None:
+                new_T[k] = to_matrices(self.dim, value)
+                placed[k] = True
+        if start == 0 and len(placed) and not placed[0]:  # the very first pose, placed by nothing: at the identity
+            new_T[0] = np.eye(n)
+            placed[0] = True
+        for (i, j), Z_ij, is_loop in zip(rows.tolist(), Z, robust.tolist()):
+            placed_i, placed_j = i < start or placed[i - start], j < start or placed[j - start]
+            if is_loop or placed_i == placed_j:
+                continue
+            if placed_i:
+                new_T[j - start] = (self.T[i] if i < start else new_T[i - start]) @ Z_ij
+                placed[j - start] = True
+            else:
+                new_T[i - start] = (self.T[j] if j < start else new_T[j - start]) @ group.inverse(Z_ij)
+                placed[i - start] = True
+        if not placed.all():
+            unplaced = self.vertex_ids[start:][~placed][:5].tolist()
+            raise GraphError(f"poses {unplaced} have no value and no odometry from a placed pose")
+        return new_T
+
+    def grow(self, name: str, rows: np.ndarray) -> None:
+        """Append `rows` to the array attribute `name` in time that follows `rows`: the array is
+        kept as the first rows of a buffer with an eighth of room to spare (a new buffer when
+        full: about nine copies per row on average). An attribute a solve has replaced by another
+        array is copied into a new buffer first."""
+        current = getattr(self, name)
+        size, grown = len(current), len(current) + len(rows)
+        buffer = self.buffers.get(name)
+        if (
+            buffer is None
+            or current.base is not buffer
+            or current.ctypes.data != buffer.ctypes.data  # not a prefix of its buffer
+            or grown > len(buffer)
+        ):
+            buffer = np.empty((grown + max(16, grown // 8), *current.shape[1:]), dtype=current.dtype)
+            buffer[:size] = current
+            self.buffers[name] = buffer
+        buffer[size:grown] = rows
+        setattr(self, name, buffer[:grown])
+
+    def factors(self) -> BetweenFactors:
+        """The factors of every edge, built when first needed after the graph changed."""
+        if self._factors is None:
+            self._factors = BetweenFactors(self.dim, self.edges, self.Z_inv, self.information)
+        return self._factors
+
+    def current_problem(self) -> Problem:
+        """The whole map's problem (`problem`), built if the graph changed since the last one."""
+        if self.problem is None:
+            # Its whole system is solved by CG with the trusted preconditioner; only a fallback factorizes it.
+            # Every entry was checked when added: no PoseGraph to check them again.
+            self.problem = Problem.from_factors(
+                self.factors(), self.fixed(len(self.vertex_ids)), self.settings.linear_solver, fill_reducing=False
+            )
+        return self.problem
+
+    def prefix_problem(self, num_poses: int, num_edges: int) -> Problem:
+        """The problem of the graph's first `num_poses` poses and `num_edges` edges, as
+        `current_problem` built it when the graph had those."""
+        edges = slice(num_edges)
+        factors = BetweenFactors(self.dim, self.edges[edges], self.Z_inv[edges], self.information[edges])
+        return Problem.from_factors(factors, self.fixed(num_poses), self.settings.linear_solver, fill_reducing=False)
+
+    def fixed(self, num_poses: int) -> np.ndarray:
+        """`(num_poses,)` bool: the gauge's row (the solver fixes row 0 itself when none is)."""
+        fixed = np.zeros(num_poses, dtype=bool)
+        fixed[self.gauge] = self.gauge != 0
+        return fixed
+
+    def graph(self) -> PoseGraph:
+        """The current graph in insertion (row) order, poses at the current estimate. Its vertex
+        ids are the rows: poses may arrive in any id order, and a `PoseGraph` keeps its ids sorted."""
+        return PoseGraph(
+            dim=self.dim,
+            vertex_ids=np.arange(len(self.vertex_ids)),
+            poses=from_matrices(self.dim, self.T),
+            edges=self.edges,
+            measurements=self.measurements,
+            information=self.information,
+            fixed=self.fixed(len(self.vertex_ids)),
+        )
+
+    def save(self, local: LocalProblem | None) -> Saved:
+        """What the stages on `local` (None: the whole map) may change of the estimate (`Saved`)."""
+        if local is None:  # whole-map solves replace the arrays, never write into them
+            return Saved(None, self.T, None, self.r)
+        return Saved(local.rows, self.T[local.rows], local.edges, self.r[local.edges])
+
+    def restore(self, saved: Saved) -> None:
+        """Put the estimate back as `saved` holds it."""
+        if saved.rows is None or saved.edges is None:
+            self.T, self.r = saved.T, saved.r
+        else:
+            self.T[saved.rows] = saved.T
+            self.r[saved.edges] = saved.r
