@@ -35,6 +35,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal, Protocol
 
 import numpy as np
@@ -274,12 +275,16 @@ class Problem:
 
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
-        group = group_of(self.factors.dim)
-        free_index = self.system.free_index
-        free = free_index >= 0
+        free, blocks = self._free_blocks
         moved = T.copy()
-        moved[free] = group.rplus(T[free], step.reshape(-1, self.tangent_dim)[free_index[free]])
+        moved[free] = group_of(self.factors.dim).rplus(T[free], step.reshape(-1, self.tangent_dim)[blocks])
         return moved
+
+    @cached_property
+    def _free_blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """`(N,)` bool, the free poses, and `(num_free,)` the unknown block of each, in pose order."""
+        free = self.system.free_index >= 0
+        return free, self.system.free_index[free]
 
 
 class _Clock:
