@@ -67,11 +67,16 @@ IterationCallback = Callable[[int, float], None]
 """Receives `(iterations, cost)` after each accepted step of a solve (progress display)."""
 DAMPING_MIN_FACTOR = 0.1  # largest shrink of lambda per accepted step, as GTSAM's factor 10
 _GAUSS_NEWTON_SINGULAR = (
-    "Gauss-Newton cannot solve its normal equations at iteration {}{}: they are singular, so some"
-    " pose or direction is not pinned down by the edges (a part of the graph joined to the rest"
-    " by no edge and holding no fixed pose, or only by edges with tiny information). Use"
-    " Levenberg-Marquardt instead (SolverOptions(method='lm'), egnc-solve --solver lm), whose"
-    " damping keeps the system solvable, or fix a pose in each such part."
+    "Gauss-Newton cannot solve its normal equations at iteration {}{}: they are singular (or, by"
+    " rounding, indefinite), so some pose or direction is not pinned down by the edges (a part of"
+    " the graph joined to the rest by no edge and holding no fixed pose, or only by edges with"
+    " tiny information). Use Levenberg-Marquardt instead (SolverOptions(method='lm'), egnc-solve"
+    " --solver lm), whose damping keeps the system solvable, or fix a pose in each such part."
+)
+_GAUSS_NEWTON_NO_DECREASE = (
+    " (Gauss-Newton's full step increased the cost, as it does on ill-conditioned normal equations,"
+    " e.g. a pose held only by an edge with tiny information: Levenberg-Marquardt,"
+    " SolverOptions(method='lm') or egnc-solve --solver lm, damps the step)"
 )
 
 
@@ -497,6 +502,7 @@ class _Run:
     def result(self, keep_errors: bool) -> SolverResult:
         """The `SolverResult` of the run so far."""
         point = self.point
+        gauss_newton_stuck = self.status == 4 and not self.use_damping
         return SolverResult(
             poses=point.T,
             residual_norms=point.r,
@@ -505,7 +511,7 @@ class _Run:
             iterations=self.iterations,
             linear_solves=self.linear_solves,
             status=self.status,
-            message=STATUS_MESSAGES[self.status],
+            message=STATUS_MESSAGES[self.status] + (_GAUSS_NEWTON_NO_DECREASE if gauss_newton_stuck else ""),
             time_s=time.perf_counter() - self.started,
             timings=dict(self.clock.totals),
             linear=self.steps.statistics,
