@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from egnc.api import solve
+from egnc.errors import SolverError
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o
 from egnc.linalg.linear_solvers import cholmod_available, rslab_available
@@ -123,6 +124,64 @@ def test_gauss_newton_and_levenberg_marquardt_agree(dataset_path, method):
     graph = read_g2o(dataset_path("intel.g2o"))
     result = solve(graph, "l2", options=SolverOptions(method=method))
     assert result.cost == pytest.approx(GTSAM_OPTIMA["intel.g2o"], rel=1e-8)
+
+
+def unjoined_pair_graph() -> PoseGraph:
+    """A noisy 2D chain of three poses and, joined to it by no edge, a pair of poses that fits its
+    one edge exactly: the pair holds no fixed pose, so its gauge is free and the undamped normal
+    equations are singular (with integer Jacobians, exactly: every backend meets a zero pivot)."""
+    poses = np.array([[0.0, 0.0, 0.0], [0.9, 0.2, 0.4], [2.1, 0.3, 0.2], [5.0, 0.0, 0.0], [6.0, 0.0, 0.0]])
+    return PoseGraph(
+        dim=2,
+        vertex_ids=np.arange(5),
+        poses=poses,
+        edges=np.array([[0, 1], [1, 2], [3, 4]]),
+        measurements=np.array([[1.0, 0.0, 0.3], [1.0, 0.0, 0.3], [1.0, 0.0, 0.0]]),
+        information=np.tile(np.eye(3), (3, 1, 1)),
+    )
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_gauss_newton_on_singular_normal_equations_says_to_use_levenberg_marquardt(backend):
+    graph = unjoined_pair_graph()
+    with pytest.raises(SolverError, match=r"singular.*method='lm'.*--solver lm"):
+        solve(graph, "l2", linear_solver=backend, options=SolverOptions(method="gn"))
+    result = solve(graph, "l2", linear_solver=backend, options=SolverOptions(method="lm"))
+    assert result.converged, result.message
+    assert result.cost < 1e-12
+
+
+def weakly_held_chain() -> PoseGraph:
+    """A 2D chain of six poses whose second edge has information 1e-16: the poses after it are held
+    only through that edge, and the undamped normal equations are ill-conditioned."""
+    rng = np.random.default_rng(0)
+    information = np.tile(np.eye(3), (5, 1, 1))
+    information[1] *= 1e-16
+    return PoseGraph(
+        dim=2,
+        vertex_ids=np.arange(6),
+        poses=np.c_[np.arange(6.0), rng.normal(0, 0.3, 6), rng.normal(0, 0.3, 6)],
+        edges=np.c_[np.arange(5), np.arange(1, 6)],
+        measurements=np.tile([1.0, 0.0, 0.3], (5, 1)),
+        information=information,
+    )
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_gauss_newton_on_ill_conditioned_normal_equations_says_to_use_levenberg_marquardt(backend):
+    # Depending on the backend's rounding the undamped system factorizes (and the full step
+    # increases the cost) or shows a negative pivot: either way the user is told what to do.
+    graph = weakly_held_chain()
+    try:
+        stuck = solve(graph, "l2", linear_solver=backend, options=SolverOptions(method="gn"))
+    except SolverError as error:
+        message = str(error)
+    else:
+        assert stuck.status == 4
+        message = stuck.message
+    assert "--solver lm" in message
+    result = solve(graph, "l2", linear_solver=backend, options=SolverOptions(method="lm"))
+    assert result.converged, result.message
 
 
 def test_edges_only_file_solves_from_spanning_tree_guess(dataset_path):

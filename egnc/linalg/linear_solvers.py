@@ -516,6 +516,10 @@ class ScipySolver:
         self._indices = indices.astype(np.int32)
         self._indptr = indptr.astype(np.int32)
         self._permc_spec = "NATURAL" if ordered else "MMD_AT_PLUS_A"
+        # One matrix object, its values swapped in per factorization, as `CholmodSolver` does:
+        # SciPy checks a new sparse matrix's arrays, and `splu` its index format, once.
+        self._values = _matrix(np.ones(len(indices)), self._indices, self._indptr)
+        self._values.data = _NO_VALUES
 
     def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """Factorize the matrix with values `data` (SuperLU) and solve for `rhs`."""
@@ -525,17 +529,20 @@ class ScipySolver:
         """Factorize the matrix with values `data` (SuperLU)."""
         from scipy.sparse.linalg import splu
 
-        matrix = _matrix(data, self._indices, self._indptr)
+        assert data.shape == self._indices.shape and data.dtype == np.float64, "values do not fit the pattern"
+        self._values.data = data
         try:
             with serial_native_threads():
                 lu = splu(
-                    matrix,
+                    self._values,
                     permc_spec=self._permc_spec,
                     diag_pivot_thresh=0.0,
                     options={"SymmetricMode": True},
                 )
         except RuntimeError as error:  # SuperLU reports an exactly singular factor this way
             raise NotPositiveDefiniteError(f"normal equations are singular ({error})") from None
+        finally:
+            self._values.data = _NO_VALUES  # SuperLU copied the values into its factors
 
         def solve(rhs: np.ndarray) -> np.ndarray:
             with serial_native_threads():

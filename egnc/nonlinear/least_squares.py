@@ -35,6 +35,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal, Protocol
 
 import numpy as np
@@ -65,6 +66,18 @@ CONVERGED = (1, 2, 3)
 IterationCallback = Callable[[int, float], None]
 """Receives `(iterations, cost)` after each accepted step of a solve (progress display)."""
 DAMPING_MIN_FACTOR = 0.1  # largest shrink of lambda per accepted step, as GTSAM's factor 10
+_GAUSS_NEWTON_SINGULAR = (
+    "Gauss-Newton cannot solve its normal equations at iteration {}{}: they are singular (or, by"
+    " rounding, indefinite), so some pose or direction is not pinned down by the edges (a part of"
+    " the graph joined to the rest by no edge and holding no fixed pose, or only by edges with"
+    " tiny information). Use Levenberg-Marquardt instead (SolverOptions(method='lm'), egnc-solve"
+    " --solver lm), whose damping keeps the system solvable, or fix a pose in each such part."
+)
+_GAUSS_NEWTON_NO_DECREASE = (
+    " (Gauss-Newton's full step increased the cost, as it does on ill-conditioned normal equations,"
+    " e.g. a pose held only by an edge with tiny information: Levenberg-Marquardt,"
+    " SolverOptions(method='lm') or egnc-solve --solver lm, damps the step)"
+)
 
 
 class EdgeLoss(Protocol):
@@ -267,12 +280,16 @@ class Problem:
 
     def retract(self, T: np.ndarray, step: np.ndarray) -> np.ndarray:
         """Return poses `T` `(N, n, n)` moved by the stacked free-pose step `(n_unknowns,)`."""
-        group = group_of(self.factors.dim)
-        free_index = self.system.free_index
-        free = free_index >= 0
+        free, blocks = self._free_blocks
         moved = T.copy()
-        moved[free] = group.rplus(T[free], step.reshape(-1, self.tangent_dim)[free_index[free]])
+        moved[free] = group_of(self.factors.dim).rplus(T[free], step.reshape(-1, self.tangent_dim)[blocks])
         return moved
+
+    @cached_property
+    def _free_blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """`(N,)` bool, the free poses, and `(num_free,)` the unknown block of each, in pose order."""
+        free = self.system.free_index >= 0
+        return free, self.system.free_index[free]
 
 
 class _Clock:
@@ -322,115 +339,183 @@ def solve_least_squares(
 
     Returns:
         The `SolverResult`; it is returned (not raised) when the iteration limit is hit.
+
+    Raises:
+        SolverError: Gauss-Newton met normal equations it cannot solve (singular: a pose or a
+            direction the edges do not pin down); the message says to use Levenberg-Marquardt.
     """
-    loss = loss or QuadraticLoss()
-    started = time.perf_counter()
-    clock = _Clock()
-    factors = problem.factors
-    T = np.array(initial_poses, dtype=np.float64)
+    run = _Run(problem, loss or QuadraticLoss(), options, trusted)
+    run.start(np.array(initial_poses, dtype=np.float64), errors)
+    while run.status != NUMERICAL_FAILURE and run.iterations < options.max_iterations:
+        if not run.iterate(on_iteration):
+            break
+    return run.result(keep_errors)
 
-    def evaluate(poses: np.ndarray, known: EdgeErrors | None = None) -> tuple[EdgeErrors, np.ndarray, float]:
-        errors = factors.evaluate(poses) if known is None else known
+
+@dataclass(frozen=True, eq=False)
+class _Point:
+    """Poses with their residuals, whitened residual norms and cost."""
+
+    T: np.ndarray
+    errors: EdgeErrors
+    r: np.ndarray
+    cost: float
+
+
+class _Run:
+    """The state of one `solve_least_squares`: the current point, the LM damping, the counters.
+
+    `iterate` takes one step from the current point (trying damping values until one is
+    accepted, for LM) and says whether to go on; `status` then holds the termination code.
+    """
+
+    def __init__(self, problem: Problem, loss: EdgeLoss, options: SolverOptions, trusted: np.ndarray | None):
+        self.started = time.perf_counter()
+        self.problem, self.loss, self.options, self.trusted = problem, loss, options, trusted
+        self.use_damping = options.method == "lm"
+        self.clock = _Clock()
+        self.steps = problem.step_solver
+        self.point: _Point
+        self.history: list[float] = []
+        self.damping, self.growth = options.initial_damping, 2.0
+        self.step_damping = 0.0
+        self.iterations = self.linear_solves = 0
+        self.status = 0
+        # The normal equations at the current point, built when a step from it is needed.
+        self.gradient: np.ndarray | None = None
+        self.diagonal: np.ndarray | None = None
+
+    def evaluate(self, T: np.ndarray, known: EdgeErrors | None = None) -> _Point:
+        """The point at poses `T` (`known`: their residuals, if already computed)."""
+        factors = self.problem.factors
+        errors = factors.evaluate(T) if known is None else known
         r = factors.whitened_norms(errors.residuals)
-        return errors, r, float(np.sum(loss.cost(r)))
+        return _Point(T, errors, r, float(np.sum(self.loss.cost(r))))
 
-    steps = problem.step_solver
-    steps.start_solve()
-    with clock("linearize"):
-        errors, r, cost = evaluate(T, errors)
-    history = [cost]
-    damping, growth = options.initial_damping, 2.0
-    iterations = linear_solves = 0
-    step_damping = 0.0
-    status = 0 if np.isfinite(cost) else NUMERICAL_FAILURE
-    gradient = diagonal = None  # normal equations at T, built when a step from T is needed
-    while status != NUMERICAL_FAILURE and iterations < options.max_iterations:
-        if gradient is None or diagonal is None:  # always set and cleared together
-            steps.discard_factorization()
-            with clock("linearize"):
-                linearization = factors.linearize(T, errors)  # reuses the residuals at T
-            with clock("assemble"):
-                weights = loss.weight(r)
-                products = edge_products(linearization, factors.information, weights)
-                gradient, diagonal = steps.set_system(
-                    products, weights, options.linear_method, options.trust_weight, trusted
-                )
-                # Freed before the next linearization builds its own (each about 100 MB on a
-                # 50 000-pose 3D grid, where they set the robust solve's peak memory); a CG step's
-                # products stay with the step solver until `discard_factorization` above.
-                del linearization, products
-            # With the information matrices checked at input, a non-finite Jacobian, residual or
-            # weight shows in g or on H's diagonal (a column's weighted square).
-            if not np.all(np.isfinite(diagonal)) or not np.all(np.isfinite(gradient)):
-                status = NUMERICAL_FAILURE
-                break
-            diagonal = np.clip(diagonal, 1e-6, 1e32)
-        if np.max(np.abs(gradient), initial=0.0) <= options.gradient_tol:
-            status = 2
-            break
-        use_damping = options.method == "lm"
-        with clock("factorize"):
-            shift = damping * diagonal if use_damping else np.zeros_like(diagonal)
-            try:
-                step = -steps.solve(shift, gradient)
-                solved = bool(np.all(np.isfinite(step)))
-            except NotPositiveDefiniteError:
-                if not use_damping:
-                    raise
-                solved = False
-            linear_solves += 1
-        if not solved:
-            if not use_damping:
-                raise SolverError("Gauss-Newton step is not finite: the normal equations are singular")
-            damping, growth = damping * growth, growth * 2
-            if damping > options.max_damping:
-                status = 4
-                break
-            continue
-        if np.sqrt(dot(step, step)) <= options.step_tol:
-            status = 3
-            break
-        with clock("update"):
-            T_new = problem.retract(T, step)
-            errors_new, r_new, cost_new = evaluate(T_new)
-        predicted = 0.5 * dot(step, (damping * diagonal * step if use_damping else 0.0) - gradient)
-        gain = (cost - cost_new) / predicted if predicted > 0 and np.isfinite(cost_new) else -1.0
-        if use_damping and gain <= 1e-3:
-            damping, growth = damping * growth, growth * 2
-            if damping > options.max_damping:
-                status = 4
-                break
-            continue
-        if not use_damping and not cost_new < cost:  # also a non-finite trial cost
-            status = 4
-            break
-        if use_damping:
-            step_damping = damping
-            damping *= max(DAMPING_MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
-            growth = 2.0
-        previous = cost
-        T, errors, r, cost = T_new, errors_new, r_new, cost_new
-        gradient = diagonal = None
-        history.append(cost)
-        iterations += 1
+    def start(self, T: np.ndarray, errors: EdgeErrors | None) -> None:
+        """Evaluate the initial poses `T` `(N, n, n)`."""
+        self.steps.start_solve()
+        with self.clock("linearize"):
+            self.point = self.evaluate(T, errors)
+        self.history.append(self.point.cost)
+        if not np.isfinite(self.point.cost):
+            self.status = NUMERICAL_FAILURE
+
+    def iterate(self, on_iteration: IterationCallback | None) -> bool:
+        """Try one step from the current point; False when the solve stops (`status` set)."""
+        if self.gradient is None and not self.linearize():
+            self.status = NUMERICAL_FAILURE
+            return False
+        gradient, diagonal = self.gradient, self.diagonal
+        assert gradient is not None and diagonal is not None, "set and cleared together"
+        if np.max(np.abs(gradient), initial=0.0) <= self.options.gradient_tol:
+            self.status = 2
+            return False
+        with self.clock("factorize"):
+            shift = self.damping * diagonal if self.use_damping else np.zeros_like(diagonal)
+            step = self.solve_step(shift, gradient)
+        if step is None:  # LM only: the damped system could not be solved
+            return self.grow_damping()
+        if np.sqrt(dot(step, step)) <= self.options.step_tol:
+            self.status = 3
+            return False
+        with self.clock("update"):
+            trial = self.evaluate(self.problem.retract(self.point.T, step))
+        # The decrease the damped quadratic model predicts; `shift * step` is `damping * diagonal * step`.
+        predicted = 0.5 * dot(step, (shift * step if self.use_damping else 0.0) - gradient)
+        gain = (self.point.cost - trial.cost) / predicted if predicted > 0 and np.isfinite(trial.cost) else -1.0
+        if self.use_damping and gain <= 1e-3:
+            return self.grow_damping()
+        if not self.use_damping and not trial.cost < self.point.cost:  # also a non-finite trial cost
+            self.status = 4
+            return False
+        return self.accept(trial, gain, on_iteration)
+
+    def linearize(self) -> bool:
+        """Build the normal equations at the current point; False if they are not finite."""
+        steps, factors, options = self.steps, self.problem.factors, self.options
+        steps.discard_factorization()
+        with self.clock("linearize"):
+            linearization = factors.linearize(self.point.T, self.point.errors)  # reuses the residuals
+        with self.clock("assemble"):
+            weights = self.loss.weight(self.point.r)
+            products = edge_products(linearization, factors.information, weights)
+            gradient, diagonal = steps.set_system(
+                products, weights, options.linear_method, options.trust_weight, self.trusted
+            )
+            # Freed before the next linearization builds its own (each about 100 MB on a
+            # 50 000-pose 3D grid, where they set the robust solve's peak memory); a CG step's
+            # products stay with the step solver until `discard_factorization` above.
+            del linearization, products
+        # With the information matrices checked at input, a non-finite Jacobian, residual or
+        # weight shows in g or on H's diagonal (a column's weighted square).
+        if not np.all(np.isfinite(diagonal)) or not np.all(np.isfinite(gradient)):
+            return False
+        self.gradient, self.diagonal = gradient, np.clip(diagonal, 1e-6, 1e32)
+        return True
+
+    def solve_step(self, shift: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
+        """The step `-(H + diag(shift))^-1 g`, or None (LM) when it cannot be solved or is not finite.
+
+        Raises:
+            SolverError: Gauss-Newton's (undamped) system is singular: no damping can help it.
+        """
+        self.linear_solves += 1
+        try:
+            step = -self.steps.solve(shift, gradient)
+        except NotPositiveDefiniteError as error:
+            if self.use_damping:
+                return None
+            raise SolverError(_GAUSS_NEWTON_SINGULAR.format(self.iterations, f" ({error})")) from None
+        if np.all(np.isfinite(step)):
+            return step
+        if self.use_damping:
+            return None
+        raise SolverError(_GAUSS_NEWTON_SINGULAR.format(self.iterations, ": its step is not finite"))
+
+    def grow_damping(self) -> bool:
+        """LM after a rejected step: more damping; False (status 4) past `max_damping`."""
+        self.damping, self.growth = self.damping * self.growth, self.growth * 2
+        if self.damping > self.options.max_damping:
+            self.status = 4
+            return False
+        return True
+
+    def accept(self, trial: _Point, gain: float, on_iteration: IterationCallback | None) -> bool:
+        """Move to `trial`; False when the cost decrease says the solve converged (status 1)."""
+        if self.use_damping:
+            self.step_damping = self.damping
+            self.damping *= max(DAMPING_MIN_FACTOR, 1.0 - (2.0 * gain - 1.0) ** 3)
+            self.growth = 2.0
+        previous = self.point.cost
+        self.point = trial
+        self.gradient = self.diagonal = None
+        self.history.append(trial.cost)
+        self.iterations += 1
         if on_iteration is not None:
-            on_iteration(iterations, cost)
-        if previous - cost <= options.rel_cost_tol * previous:
-            status = 1
-            break
-    return SolverResult(
-        poses=T,
-        residual_norms=r,
-        cost=cost,
-        cost_history=np.array(history),
-        iterations=iterations,
-        linear_solves=linear_solves,
-        status=status,
-        message=STATUS_MESSAGES[status],
-        time_s=time.perf_counter() - started,
-        timings=dict(clock.totals),
-        linear=steps.statistics,
-        step_damping=step_damping,
-        next_damping=damping if options.method == "lm" else 0.0,
-        errors=errors if keep_errors else None,
-    )
+            on_iteration(self.iterations, trial.cost)
+        if previous - trial.cost <= self.options.rel_cost_tol * previous:
+            self.status = 1
+            return False
+        return True
+
+    def result(self, keep_errors: bool) -> SolverResult:
+        """The `SolverResult` of the run so far."""
+        point = self.point
+        gauss_newton_stuck = self.status == 4 and not self.use_damping
+        return SolverResult(
+            poses=point.T,
+            residual_norms=point.r,
+            cost=point.cost,
+            cost_history=np.array(self.history),
+            iterations=self.iterations,
+            linear_solves=self.linear_solves,
+            status=self.status,
+            message=STATUS_MESSAGES[self.status] + (_GAUSS_NEWTON_NO_DECREASE if gauss_newton_stuck else ""),
+            time_s=time.perf_counter() - self.started,
+            timings=dict(self.clock.totals),
+            linear=self.steps.statistics,
+            step_damping=self.step_damping,
+            next_damping=self.damping if self.use_damping else 0.0,
+            errors=point.errors if keep_errors else None,
+        )
