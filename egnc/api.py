@@ -11,6 +11,7 @@ import os
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -133,73 +134,107 @@ def solve(
         check_instance("graph", graph, (str, os.PathLike), "a PoseGraph or a g2o file path")
         graph = read_g2o(graph)
     known = known_inlier_mask(graph, known_inliers)
-    robust = ~known
     backend = resolve_name(linear_solver)
     factors = BetweenFactors.from_graph(graph)
     check_representable(graph)
     if graph.fixed.all():
         return nothing_to_optimize(graph, method, known, backend, factors, init, started, gnc_options)
     graph = graph.with_poses(initial_guess(graph, init, known, backend))
+    context = StartContext(graph, ~known, factors, options, gnc_options, backend, on_stage, on_iteration)
+    graduate = _graduation(context, method)
     initial = to_matrices(graph.dim, graph.poses)
-    initial_r = factors.whitened_norms(factors.residuals(initial))
-    refine = method in GRADUATED_METHODS and gnc_options.refine
-    graduate = _graduation(graph, method, robust, options, gnc_options, backend, factors, on_stage, on_iteration)
     search: Search | None = None
-    if refine:  # the decision: the GNC stage from the guess, then every start of gnc_options.starts
-        context = StartContext(graph, robust, factors, options, gnc_options, backend, on_stage, on_iteration)
+    if method in GRADUATED_METHODS and gnc_options.refine:  # decide: the guess's GNC stage, then every start
         search = search_decisions(context, initial, graduate, gnc_options.starts)
     outcome = graduate(initial, "guess") if search is None else search.first
     assert outcome is not None
+    return _result(context, method, init, outcome, _kept(search, outcome), started)
+
+
+def _result(context: StartContext, method: str, init: str, outcome: GncOutcome, kept: _Kept, started: float) -> Result:
+    """The `Result` of a solve on `context.graph` (at its initial guess) from its first GNC stage
+    `outcome` and what it `kept`; `started` is the solve's `time.perf_counter()` reading."""
+    graph, factors, robust, gnc_options = context.graph, context.factors, context.robust, context.gnc_options
+    initial_r = factors.whitened_norms(factors.residuals(to_matrices(graph.dim, graph.poses)))
     robust_r = factors.whitened_norms(factors.residuals(outcome.poses))
-    poses, stages, status, message = outcome.poses, outcome.stages, outcome.status, outcome.message
-    start, settled, disputed = "guess", True, None
-    decided = search is not None and not search.failed  # nothing to decide on a failed solve
-    if search is not None:
-        stages, start = search.stages, search.first_start
-    if decided:
-        assert search is not None
-        start = search.kept()
-        decision = search.candidates[start]
-        disputed = search.disputed(start)
-        poses, inliers, settled = decision.poses, decision.inliers, decision.settled
-        if decision.reports:
-            status, message = decision.reports[-1].status, STATUS_MESSAGES[decision.reports[-1].status]
-        message += search.note(start)
-    r = factors.whitened_norms(factors.residuals(poses))
-    if not decided:
+    r = factors.whitened_norms(factors.residuals(kept.poses))
+    inliers = kept.inliers
+    if inliers is None:  # nothing decided: the outlier test at the solution
         inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
     if method == "l2":  # plain least squares: nothing is rejected
         inliers = np.ones(graph.num_edges, dtype=bool)
-    result_poses = from_matrices(graph.dim, poses)
+    result_poses = from_matrices(graph.dim, kept.poses)
+    decided = decided_fields(
+        graph,
+        result_poses,
+        initial_r,
+        r,
+        inliers,
+        robust,
+        kept.stages,
+        gnc_options,
+        start=kept.start,
+        settled=kept.settled,
+        disputed=kept.disputed,
+    )
     return Result(
         graph=graph.with_poses(result_poses),
         method=method,
-        linear_solver=backend,
+        linear_solver=context.linear_solver,
         residual_norms=r,
         weights=outcome.weights,
         mu=outcome.mu,
-        known_inliers=known,
+        known_inliers=~robust,
         inliers=inliers,
-        stages=stages,
-        status=status,
-        message=message,
+        stages=kept.stages,
+        status=kept.status,
+        message=kept.message,
         time_s=time.perf_counter() - started,
         timings=outcome.timings,
         robust_residual_norms=robust_r,
         init=init,
-        **decided_fields(
-            graph,
-            result_poses,
-            initial_r,
-            r,
-            inliers,
-            robust,
-            stages,
-            gnc_options,
-            start=start,
-            settled=settled,
-            disputed=disputed,
-        ),
+        **decided,
+    )
+
+
+class _Kept(NamedTuple):
+    """What a solve keeps from its GNC stage and decision (`_kept`)."""
+
+    poses: np.ndarray
+    inliers: np.ndarray | None
+    stages: tuple[StageReport, ...]
+    status: int
+    message: str
+    start: str
+    settled: bool
+    disputed: np.ndarray | None
+
+
+def _kept(search: Search | None, outcome: GncOutcome) -> _Kept:
+    """The poses, classification (None: not decided), stages, termination, start, settledness and
+    disputed loops a solve reports, from its `search` of the starts (None without `refine`) and
+    its first GNC stage `outcome`."""
+    if search is None:
+        return _Kept(outcome.poses, None, outcome.stages, outcome.status, outcome.message, "guess", True, None)
+    if search.failed:  # nothing to decide on a failed solve
+        return _Kept(
+            outcome.poses, None, search.stages, outcome.status, outcome.message, search.first_start, True, None
+        )
+    start = search.kept()
+    decision = search.candidates[start]
+    status, message = outcome.status, outcome.message
+    if decision.reports:
+        status, message = decision.reports[-1].status, STATUS_MESSAGES[decision.reports[-1].status]
+    message += search.note(start)
+    return _Kept(
+        decision.poses,
+        decision.inliers,
+        search.stages,
+        status,
+        message,
+        start,
+        decision.settled,
+        search.disputed(start),
     )
 
 
@@ -223,19 +258,10 @@ def _checked_arguments(
     return options, gnc_options
 
 
-def _graduation(
-    graph: PoseGraph,
-    method: str,
-    robust: np.ndarray,
-    options: SolverOptions,
-    gnc_options: GncOptions,
-    backend: str,
-    factors: BetweenFactors,
-    on_stage: StageCallback | None,
-    on_iteration: IterationCallback | None,
-) -> Graduate:
-    """The GNC stages of `method` as a function of the `(N, n, n)` poses they start from and the
-    start they belong to; each run gets a schedule of its own."""
+def _graduation(context: StartContext, method: str) -> Graduate:
+    """The GNC stages of `method` on `context`'s graph as a function of the `(N, n, n)` poses they
+    start from and the start they belong to; each run gets a schedule of its own."""
+    graph, robust, options, gnc_options = context.graph, context.robust, context.solver_options, context.gnc_options
     stage_options = options
     if method in GRADUATED_METHODS and gnc_options.refine:  # the refinement converges tightly; the stages need not
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, stage_tolerance(method, gnc_options)))
@@ -249,10 +275,10 @@ def _graduation(
             robust,
             stage_options,
             gnc_options,
-            backend,
-            factors,
-            on_stage,
-            on_iteration,
+            context.linear_solver,
+            context.factors,
+            context.on_stage,
+            context.on_iteration,
             start=start,
         )
 

@@ -34,6 +34,7 @@ from egnc.nonlinear.least_squares import (
     IterationCallback,
     Problem,
     SolverOptions,
+    SolverResult,
     solve_least_squares,
 )
 from egnc.robust.losses import FixedWeightLoss, KernelLoss
@@ -402,18 +403,7 @@ def run_gnc(
         solution = solve_least_squares(problem, from_poses, stage.loss, solver_options, on_iteration)
         poses = solution.poses
         r = factors.whitened_norms(factors.residuals(poses))
-        reports.append(
-            StageReport(
-                *_mu_stats(stage, robust),
-                iterations=solution.iterations,
-                cost=solution.cost,
-                time_s=time.perf_counter() - started,
-                status=solution.status,
-                active_edges=graph.num_edges,
-                cg_iterations=solution.linear.cg_iterations,
-                start=start,
-            )
-        )
+        reports.append(_stage_report(stage, robust, solution, started, graph.num_edges, start))
         if on_stage is not None:
             on_stage(reports[-1])
         for phase, seconds in solution.timings.items():
@@ -436,6 +426,23 @@ def run_gnc(
         status=status,
         message=message,
         timings=timings,
+    )
+
+
+def _stage_report(
+    stage: Stage, robust: np.ndarray, solution: SolverResult, started: float, active_edges: int, start: StageStart
+) -> StageReport:
+    """The `StageReport` of `stage`, solved as `solution` over `active_edges` edges from the
+    `time.perf_counter()` reading `started`; `robust` `(E,)` picks the edges of its `mu` statistics."""
+    return StageReport(
+        *_mu_stats(stage, robust),
+        iterations=solution.iterations,
+        cost=solution.cost,
+        time_s=time.perf_counter() - started,
+        status=solution.status,
+        active_edges=active_edges,
+        cg_iterations=solution.linear.cg_iterations,
+        start=start,
     )
 
 
