@@ -203,11 +203,11 @@ def check_starts(starts: object) -> tuple[StartName, ...]:
         raise OptionTypeError(f"GncOptions.starts must be a tuple of start names ({known}), got {starts!r:.60}")
     for name in starts:
         if name not in START_NAMES:
-            raise OptionError(f"GncOptions.starts: unknown start {name!r:.40}; known starts: {known}")
+            raise OptionError(f"GncOptions.starts has an unknown start {name!r:.40}; known starts: {known}")
     if len(set(starts)) != len(starts):
         raise OptionError(f"GncOptions.starts names a start twice: {tuple(starts)!r}")
     if "runs" in starts and starts[0] != "runs":
-        raise OptionError("GncOptions.starts: 'runs' must come first (it chooses where the GNC stage starts)")
+        raise OptionError("GncOptions.starts must list 'runs' first (it chooses where the GNC stage starts)")
     return tuple(starts)
 
 
