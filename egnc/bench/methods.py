@@ -118,8 +118,8 @@ def _convert(text: str, kind: object, what: str) -> object:
         kind = kind.type
     if typing.get_origin(kind) is tuple:
         item = typing.get_args(kind)[0]
-        names = [] if text.strip() == "()" else [name.strip() for name in text.split("+")]
-        return tuple(_convert(name, item, what) for name in names)
+        items = [] if text.strip() == "()" else [part.strip() for part in text.split("+")]
+        return tuple(_convert(part, item, what) for part in items)
     union = isinstance(kind, types.UnionType) or typing.get_origin(kind) is typing.Union
     options = typing.get_args(kind) if union else (kind,)
     if type(None) in options and text.lower() == "none":
