@@ -1,13 +1,17 @@
-"""`egnc.solve`: one call from a pose graph (or a g2o file) to an optimized graph and its report."""
+"""`egnc.solve`: one call from a pose graph (or a g2o file) to an optimized graph and its report.
+
+The solve reads and checks its input, builds the initial guess, runs the GNC stage and decides
+which loop closures are false through the starts of `GncOptions.starts`
+(`egnc.robust.pipeline`), and returns a `Result` (`egnc.robust.result`).
+"""
 
 from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, replace
-from functools import partial
+from dataclasses import replace
 from pathlib import Path
-from typing import TypedDict
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,18 +24,9 @@ from egnc.linalg.linear_solvers import resolve_name
 from egnc.nonlinear.chordal import chordal_initialization
 from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.nonlinear.initialize import initialize_poses
-from egnc.nonlinear.least_squares import (
-    NOTHING_TO_OPTIMIZE,
-    NUMERICAL_FAILURE,
-    STATUS_MESSAGES,
-    IterationCallback,
-    Problem,
-    SolverOptions,
-)
+from egnc.nonlinear.least_squares import STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
 from egnc.nonlinear.marginals import pose_covariances
-from egnc.robust.decision import Decision, StartContext, lower_by_more_than_rounding, truncated_cost
-from egnc.robust.diagnostics import solve_warnings
-from egnc.robust.elimination import elimination_decision
+from egnc.robust.decision import StartContext
 from egnc.robust.gnc import (
     GncOptions,
     GncOutcome,
@@ -39,215 +34,26 @@ from egnc.robust.gnc import (
     StageReport,
     StageStart,
     classify_inliers,
-    iteration_limited,
     known_inlier_mask,
     run_gnc,
     stage_tolerance,
 )
-from egnc.robust.regroup import regrouped_decision, runs_start
+from egnc.robust.pipeline import Graduate, Search, search_decisions
+from egnc.robust.result import Result, decided_fields, nothing_to_optimize
 from egnc.robust.schedules import GRADUATED_METHODS, METHODS, make_schedule
-from egnc.robust.starts import all_edges_decision, chordal_decision, graduated_decision
 
-__all__ = ["INITIALIZATIONS", "METHODS", "Result", "StageReport", "marginal_covariances", "solve"]
+__all__ = [
+    "INITIALIZATIONS",
+    "METHODS",
+    "Result",
+    "StageReport",
+    "decided_fields",  # egnc.robust.result's, named here as before it moved
+    "marginal_covariances",
+    "solve",
+]
 
 INITIALIZATIONS = ("file", "odometry", "chordal")
 """Initial guesses `egnc.solve(init=...)` and `egnc-solve --init` accept (see `initial_guess`)."""
-
-_START_NAMES = {
-    "guess": "initial guess",
-    "runs": "GNC stage from the chordal map of the loop closures in runs",
-    "chordal": "chordal initialization",
-    "chordal-all": "GNC stage run again from the chordal initialization of every edge",
-    "regrouped": "rejected runs of loop closures put back together",
-    "elimination": "backward elimination over every edge",
-}
-"""How the message names the start whose decision was kept, and the first start it was compared with."""
-
-
-@dataclass(frozen=True, eq=False)
-class Result:
-    """Outcome of `egnc.solve`.
-
-    Attributes:
-        graph: the input graph with optimized poses.
-        method: the method used.
-        linear_solver: the linear backend used, `"cholmod"`, `"rslab"` or `"scipy"`.
-        residual_norms: `(E,)` whitened residual norms `r` at the solution (never kernel-scaled);
-            for graduated methods the solution is the least-squares optimum of the accepted edges.
-        weights: `(E,)` IRLS weight of each edge at the end of the last GNC stage of the first
-            start (`stages[0].start`: the initial guess or the runs' map; 1 for known inliers and
-            least squares).
-        mu: `(E,)` final kernel parameter of each edge (nan for known inliers and for kernels
-            without one).
-        known_inliers: `(E,)` bool, edges held quadratic (odometry by default).
-        inliers: `(E,)` bool, false for the loop closures rejected as outliers: for graduated
-            methods the decision of `egnc.robust.decision` (`r^2 > chi2.ppf(q, d)` on the least-squares
-            map of the accepted edges, q = `GncOptions.outlier_quantile`, 0.99 by default); for
-            fixed kernels the same test at their solution; all true for `"l2"`.
-        initial_cost: least-squares cost `0.5 sum r^2` at the initial guess.
-        cost: least-squares cost `0.5 sum r^2` at the solution, over all edges (rejected ones too).
-        accepted_cost: the same over the accepted edges only.
-        truncated_cost: `egnc.robust.decision.truncated_cost` at the solution: accepted loops pay
-            `r^2 / 2`, rejected ones `chi2.ppf(q, d) / 2`; the cost by which two decisions are
-            compared.
-        iterations: accepted solver steps over all stages.
-        stages: per-stage reports; with `GncOptions.refine`, the last one is the least-squares
-            refinement on the accepted edges (its `mu` statistics are nan).
-        status: termination code of the last solve (1, 2, 3 mean converged; see
-            `egnc.nonlinear.least_squares.STATUS_MESSAGES`).
-        message: termination reason.
-        time_s: wall time in seconds, from graph to result.
-        timings: seconds per solver phase, summed over stages.
-        robust_residual_norms: `(E,)` `r` where `weights` are taken, before the outlier
-            decision (the robust optimum; equal to `residual_norms` for single-stage methods).
-            With `residual_norms` it explains a rejection: a loop far off at both is false.
-        init: the initial guess used (`INITIALIZATIONS`).
-        start: where the decision that was kept started: `"guess"` (the GNC solve from `init`),
-            `"runs"` (the GNC solve from the chordal map of the loops in runs, where that fits
-            better than `init`; `GncOptions.runs_start`), `"chordal"` (the chordal
-            initialization, kept for its lower truncated cost; `GncOptions.chordal_start`),
-            `"chordal-all"` (the GNC stage run again from the chordal initialization of every
-            edge; `GncOptions.chordal_all_start`), `"regrouped"`
-            (rejected runs of loops put back together; `GncOptions.regroup_start`),
-            `"elimination"` (backward elimination from least squares over every edge;
-            `GncOptions.elimination_start`) or `"online"` (`egnc.online.OnlineSolver`'s estimate).
-        warnings: one sentence per thing the user should check before trusting the result
-            (a stage stopped at its iteration limit, most loop closures rejected, ...).
-        settled: whether the kept decision's rounds reached a classification that no longer
-            changed (`egnc.robust.decision.Decision.settled`); True where no decision was made.
-    """
-
-    graph: PoseGraph
-    method: str
-    linear_solver: str
-    residual_norms: np.ndarray
-    weights: np.ndarray
-    mu: np.ndarray
-    known_inliers: np.ndarray
-    inliers: np.ndarray
-    initial_cost: float
-    cost: float
-    iterations: int
-    stages: tuple[StageReport, ...]
-    status: int
-    message: str
-    time_s: float
-    timings: dict[str, float]
-    robust_residual_norms: np.ndarray
-    accepted_cost: float
-    truncated_cost: float
-    warnings: tuple[str, ...] = ()
-    init: str = "file"
-    start: str = "guess"
-    settled: bool = True
-
-    def __repr__(self) -> str:
-        loops = int(np.count_nonzero(~self.known_inliers))
-        return (
-            f"Result(method={self.method!r}, poses={self.graph.num_poses}, edges={self.graph.num_edges},"
-            f" rejected={len(self.rejected_edges)} of {loops} loop closures, cost={self.cost:.6g},"
-            f" stages={len(self.stages)}, iterations={self.iterations}, status={self.status}"
-            f" ({self.message!r}), time_s={self.time_s:.3g}, warnings={len(self.warnings)})"
-        )
-
-    @property
-    def converged(self) -> bool:
-        """Whether the last solve and every stage of the kept start stopped on a convergence criterion."""
-        return self.status in (1, 2, 3) and not iteration_limited(self.stages, self.start)
-
-    @property
-    def rejected_edges(self) -> np.ndarray:
-        """0-based indices, in input-file order, of the edges rejected as outliers."""
-        return np.flatnonzero(~self.inliers)
-
-
-class ResultCosts(TypedDict):
-    """The cost fields of a `Result` (see its docstring)."""
-
-    initial_cost: float
-    cost: float
-    accepted_cost: float
-    truncated_cost: float
-
-
-def result_costs(
-    initial_r: np.ndarray, r: np.ndarray, inliers: np.ndarray, robust: np.ndarray, d: int, quantile: float
-) -> ResultCosts:
-    """The cost fields of a `Result` from `(E,)` residual norms at the guess and at the solution.
-
-    Args:
-        initial_r, r: `(E,)` whitened residual norms at the initial guess and at the solution.
-        inliers: `(E,)` bool, the accepted edges.
-        robust: `(E,)` bool, the loop closures.
-        d: residual dimension.
-        quantile: the outlier test's quantile (`GncOptions.outlier_quantile`).
-    """
-    return ResultCosts(
-        initial_cost=float(0.5 * np.sum(initial_r**2)),
-        cost=float(0.5 * np.sum(r**2)),
-        accepted_cost=float(0.5 * np.sum(r[inliers] ** 2)),
-        truncated_cost=truncated_cost(r, robust, d, quantile),
-    )
-
-
-class DecidedFields(ResultCosts):
-    """The fields of a `Result` that follow from its decision (see its docstring)."""
-
-    iterations: int
-    warnings: tuple[str, ...]
-    start: str
-    settled: bool
-
-
-def decided_fields(
-    graph: PoseGraph,
-    result_poses: np.ndarray,
-    initial_r: np.ndarray,
-    r: np.ndarray,
-    inliers: np.ndarray,
-    robust: np.ndarray,
-    stages: tuple[StageReport, ...],
-    gnc_options: GncOptions,
-    *,
-    start: str,
-    settled: bool,
-    disputed: np.ndarray | None,
-) -> DecidedFields:
-    """Costs, iteration count, warnings, start and settledness of a `Result`.
-
-    Args:
-        graph: the graph at its initial guess.
-        result_poses: `(N, P)` the result's poses.
-        initial_r, r: `(E,)` whitened residual norms at the initial guess and at `result_poses`.
-        inliers: `(E,)` bool, the accepted edges.
-        robust: `(E,)` bool, the loop closures.
-        stages: every stage run (every start's included).
-        gnc_options: the outlier test's options.
-        start, settled, disputed: the kept decision's start, whether it settled, and the loops the
-            other starts' decisions accepted where it rejects (None when only one start decided).
-    """
-    d = graph.tangent_dim
-    initial_fits = classify_inliers(initial_r, robust, d, gnc_options)
-    warnings = solve_warnings(
-        graph,
-        stages,
-        robust,
-        inliers,
-        initial_r,
-        r,
-        initial_fits,
-        result_poses,
-        start=start,
-        settled=settled,
-        disputed=disputed,
-    )
-    return DecidedFields(
-        **result_costs(initial_r, r, inliers, robust, d, gnc_options.outlier_quantile),
-        iterations=sum(stage.iterations for stage in stages),
-        warnings=warnings,
-        start=start,
-        settled=settled,
-    )
 
 
 def initial_guess(graph: PoseGraph, init: str, known_inliers: np.ndarray, linear_solver: str) -> np.ndarray:
@@ -323,6 +129,124 @@ def solve(
     status 6 (`NOTHING_TO_OPTIMIZE`, not "converged"), every edge accepted, and a warning.
     """
     started = time.perf_counter()
+    options, gnc_options = _checked_arguments(method, init, options, gnc_options, on_stage, on_iteration)
+    if not isinstance(graph, PoseGraph):
+        check_instance("graph", graph, (str, os.PathLike), "a PoseGraph or a g2o file path")
+        graph = read_g2o(graph)
+    known = known_inlier_mask(graph, known_inliers)
+    backend = resolve_name(linear_solver)
+    factors = BetweenFactors.from_graph(graph)
+    check_representable(graph)
+    if graph.fixed.all():
+        return nothing_to_optimize(graph, method, known, backend, factors, init, started, gnc_options)
+    graph = graph.with_poses(initial_guess(graph, init, known, backend))
+    context = StartContext(graph, ~known, factors, options, gnc_options, backend, on_stage, on_iteration)
+    graduate = _graduation(context, method)
+    initial = to_matrices(graph.dim, graph.poses)
+    search: Search | None = None
+    if method in GRADUATED_METHODS and gnc_options.refine:  # decide: the guess's GNC stage, then every start
+        search = search_decisions(context, initial, graduate, gnc_options.starts)
+    outcome = graduate(initial, "guess") if search is None else search.first
+    assert outcome is not None
+    return _result(context, method, init, outcome, _kept(search, outcome), started)
+
+
+def _result(context: StartContext, method: str, init: str, outcome: GncOutcome, kept: _Kept, started: float) -> Result:
+    """The `Result` of a solve on `context.graph` (at its initial guess) from its first GNC stage
+    `outcome` and what it `kept`; `started` is the solve's `time.perf_counter()` reading."""
+    graph, factors, robust, gnc_options = context.graph, context.factors, context.robust, context.gnc_options
+    initial_r = factors.whitened_norms(factors.residuals(to_matrices(graph.dim, graph.poses)))
+    robust_r = factors.whitened_norms(factors.residuals(outcome.poses))
+    r = factors.whitened_norms(factors.residuals(kept.poses))
+    inliers = kept.inliers
+    if inliers is None:  # nothing decided: the outlier test at the solution
+        inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
+    if method == "l2":  # plain least squares: nothing is rejected
+        inliers = np.ones(graph.num_edges, dtype=bool)
+    result_poses = from_matrices(graph.dim, kept.poses)
+    decided = decided_fields(
+        graph,
+        result_poses,
+        initial_r,
+        r,
+        inliers,
+        robust,
+        kept.stages,
+        gnc_options,
+        start=kept.start,
+        settled=kept.settled,
+        disputed=kept.disputed,
+    )
+    return Result(
+        graph=graph.with_poses(result_poses),
+        method=method,
+        linear_solver=context.linear_solver,
+        residual_norms=r,
+        weights=outcome.weights,
+        mu=outcome.mu,
+        known_inliers=~robust,
+        inliers=inliers,
+        stages=kept.stages,
+        status=kept.status,
+        message=kept.message,
+        time_s=time.perf_counter() - started,
+        timings=outcome.timings,
+        robust_residual_norms=robust_r,
+        init=init,
+        **decided,
+    )
+
+
+class _Kept(NamedTuple):
+    """What a solve keeps from its GNC stage and decision (`_kept`)."""
+
+    poses: np.ndarray
+    inliers: np.ndarray | None
+    stages: tuple[StageReport, ...]
+    status: int
+    message: str
+    start: str
+    settled: bool
+    disputed: np.ndarray | None
+
+
+def _kept(search: Search | None, outcome: GncOutcome) -> _Kept:
+    """The poses, classification (None: not decided), stages, termination, start, settledness and
+    disputed loops a solve reports, from its `search` of the starts (None without `refine`) and
+    its first GNC stage `outcome`."""
+    if search is None:
+        return _Kept(outcome.poses, None, outcome.stages, outcome.status, outcome.message, "guess", True, None)
+    if search.failed:  # nothing to decide on a failed solve
+        return _Kept(
+            outcome.poses, None, search.stages, outcome.status, outcome.message, search.first_start, True, None
+        )
+    start = search.kept()
+    decision = search.candidates[start]
+    status, message = outcome.status, outcome.message
+    if decision.reports:
+        status, message = decision.reports[-1].status, STATUS_MESSAGES[decision.reports[-1].status]
+    message += search.note(start)
+    return _Kept(
+        decision.poses,
+        decision.inliers,
+        search.stages,
+        status,
+        message,
+        start,
+        decision.settled,
+        search.disputed(start),
+    )
+
+
+def _checked_arguments(
+    method: str,
+    init: str,
+    options: SolverOptions | None,
+    gnc_options: GncOptions | None,
+    on_stage: StageCallback | None,
+    on_iteration: IterationCallback | None,
+) -> tuple[SolverOptions, GncOptions]:
+    """`solve`'s options with their defaults filled in, after checking its arguments' types and values."""
     check_choice("method", method, METHODS)
     check_choice("init", init, INITIALIZATIONS)
     options = SolverOptions() if options is None else options
@@ -331,26 +255,18 @@ def solve(
     check_instance("gnc_options", gnc_options, GncOptions)
     check_callable("on_stage", on_stage)
     check_callable("on_iteration", on_iteration)
-    if not isinstance(graph, PoseGraph):
-        check_instance("graph", graph, (str, os.PathLike), "a PoseGraph or a g2o file path")
-        graph = read_g2o(graph)
-    known = known_inlier_mask(graph, known_inliers)
-    robust = ~known
-    backend = resolve_name(linear_solver)
-    factors = BetweenFactors.from_graph(graph)
-    check_representable(graph)
-    if graph.fixed.all():
-        return _nothing_to_optimize(graph, method, known, backend, factors, init, started, gnc_options)
-    graph = graph.with_poses(initial_guess(graph, init, known, backend))
-    initial = to_matrices(graph.dim, graph.poses)
-    initial_r = factors.whitened_norms(factors.residuals(initial))
-    refine = method in GRADUATED_METHODS and gnc_options.refine
+    return options, gnc_options
+
+
+def _graduation(context: StartContext, method: str) -> Graduate:
+    """The GNC stages of `method` on `context`'s graph as a function of the `(N, n, n)` poses they
+    start from and the start they belong to; each run gets a schedule of its own."""
+    graph, robust, options, gnc_options = context.graph, context.robust, context.solver_options, context.gnc_options
     stage_options = options
-    if refine:  # the refinement converges tightly; the stages need not
+    if method in GRADUATED_METHODS and gnc_options.refine:  # the refinement converges tightly; the stages need not
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, stage_tolerance(method, gnc_options)))
 
     def graduate(start_poses: np.ndarray, start: StageStart = "guess") -> GncOutcome:
-        """The GNC stages of `method` from `(N, n, n)` poses, with a schedule of their own."""
         schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
         return run_gnc(
             graph,
@@ -359,147 +275,14 @@ def solve(
             robust,
             stage_options,
             gnc_options,
-            backend,
-            factors,
-            on_stage,
-            on_iteration,
+            context.linear_solver,
+            context.factors,
+            context.on_stage,
+            context.on_iteration,
             start=start,
         )
 
-    context = StartContext(graph, robust, factors, options, gnc_options, backend, on_stage, on_iteration)
-    runs = runs_start(context, initial) if refine and gnc_options.runs_start else None
-    first: StageStart = "guess" if runs is None else "runs"
-    outcome = graduate(initial if runs is None else runs.poses, first)
-    poses, stages = outcome.poses, outcome.stages
-    status, message = outcome.status, outcome.message
-    robust_r = factors.whitened_norms(factors.residuals(poses))
-    decide = refine and status != NUMERICAL_FAILURE  # nothing to decide on a failed solve
-    start: str = first
-    settled, message_note = True, ""
-    disputed: np.ndarray | None = None
-    if decide:
-        decision = context.decide(poses, classify_inliers(robust_r, robust, graph.tangent_dim, gnc_options), first)
-        stages += decision.reports
-        candidates: dict[str, Decision] = {first: decision}
-        bent = runs is not None and runs.contradicted(decision.inliers)  # the runs' map may be bent
-        if bent:
-            other, reports = graduated_decision(context, initial, "guess", graduate)
-            stages += reports
-            if other is not None:
-                candidates["guess"] = other
-        if gnc_options.chordal_start:
-            trusted = ~robust | (outcome.weights >= options.trust_weight)
-            best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-            # After a runs start the chordal start classifies at the runs' chordal map (egnc.robust.starts).
-            runs_map = runs.poses if runs is not None and not bent else None
-            other, reports = chordal_decision(context, best, trusted, runs_map)
-            stages += reports
-            if other is not None:
-                candidates["chordal"] = other
-        later_starts = (
-            ("chordal-all", gnc_options.chordal_all_start, partial(all_edges_decision, graduate=graduate)),
-            ("regrouped", gnc_options.regroup_start, regrouped_decision),
-            ("elimination", gnc_options.elimination_start, elimination_decision),
-        )
-        for name, enabled, decide_from in later_starts:  # each tries to beat the best decision so far
-            if enabled:
-                best = min(candidates.values(), key=lambda candidate: candidate.truncated_cost)
-                other, reports = decide_from(context, best)
-                stages += reports
-                if other is not None:
-                    candidates[name] = other
-        for name, candidate in candidates.items():
-            if lower_by_more_than_rounding(candidate.truncated_cost, candidates[start].truncated_cost):
-                start = name
-        decision = candidates[start]
-        if start != first:
-            message_note = (
-                f"; decision from the {_START_NAMES[start]} (truncated cost {decision.truncated_cost:.6g},"
-                f" against {candidates[first].truncated_cost:.6g} from the {_START_NAMES[first]})"
-            )
-        elif first != "guess":
-            message_note = f"; decision from the {_START_NAMES[first]}"
-        if len(candidates) > 1:
-            accepted_elsewhere = np.logical_or.reduce([c.inliers for name, c in candidates.items() if name != start])
-            disputed = robust & ~decision.inliers & accepted_elsewhere
-        poses, inliers, settled = decision.poses, decision.inliers, decision.settled
-        if decision.reports:
-            status, message = decision.reports[-1].status, STATUS_MESSAGES[decision.reports[-1].status]
-        message += message_note
-    r = factors.whitened_norms(factors.residuals(poses))
-    if not decide:
-        inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
-    if method == "l2":  # plain least squares: nothing is rejected
-        inliers = np.ones(graph.num_edges, dtype=bool)
-    result_poses = from_matrices(graph.dim, poses)
-    return Result(
-        graph=graph.with_poses(result_poses),
-        method=method,
-        linear_solver=backend,
-        residual_norms=r,
-        weights=outcome.weights,
-        mu=outcome.mu,
-        known_inliers=known,
-        inliers=inliers,
-        stages=stages,
-        status=status,
-        message=message,
-        time_s=time.perf_counter() - started,
-        timings=outcome.timings,
-        robust_residual_norms=robust_r,
-        init=init,
-        **decided_fields(
-            graph,
-            result_poses,
-            initial_r,
-            r,
-            inliers,
-            robust,
-            stages,
-            gnc_options,
-            start=start,
-            settled=settled,
-            disputed=disputed,
-        ),
-    )
-
-
-def _nothing_to_optimize(
-    graph: PoseGraph,
-    method: str,
-    known: np.ndarray,
-    backend: str,
-    factors: BetweenFactors,
-    init: str,
-    started: float,
-    gnc_options: GncOptions,
-) -> Result:
-    """The `Result` of a graph whose poses are all fixed: the graph unchanged, no stage run, a warning."""
-    r = factors.whitened_norms(factors.residuals(to_matrices(graph.dim, graph.poses)))
-    inliers = np.ones(graph.num_edges, dtype=bool)
-    return Result(
-        graph=graph,
-        method=method,
-        linear_solver=backend,
-        residual_norms=r,
-        weights=np.ones(graph.num_edges),
-        mu=np.full(graph.num_edges, np.nan),
-        known_inliers=known,
-        inliers=inliers,
-        **result_costs(r, r, inliers, ~known, graph.tangent_dim, gnc_options.outlier_quantile),
-        iterations=0,
-        stages=(),
-        status=NOTHING_TO_OPTIMIZE,
-        message=STATUS_MESSAGES[NOTHING_TO_OPTIMIZE],
-        time_s=time.perf_counter() - started,
-        timings={},
-        robust_residual_norms=r,
-        warnings=(
-            f"all {graph.num_poses} poses are fixed: there is nothing to optimize; the graph is returned "
-            "unchanged and no edge is rejected",
-        ),
-        init=init,
-    )
+    return graduate
 
 
 def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = None) -> np.ndarray:

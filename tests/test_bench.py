@@ -49,6 +49,13 @@ def test_method_specs_with_options():
     assert [s.label for s in specs] == ["egnc[max_stages=50,c=2]", "risam", "l2", "gtsam-lm"]
 
 
+def test_method_specs_choose_the_starts_by_name():
+    assert parse_method("egnc[starts=chordal+regrouped]").gnc_options().starts == ("chordal", "regrouped")
+    assert parse_method("egnc[starts=()]").gnc_options().starts == ()
+    with pytest.warns(DeprecationWarning, match="starts="):  # the former booleans, for one release
+        assert "chordal" not in parse_method("egnc[chordal_start=false]").gnc_options().starts
+
+
 def test_option_values_follow_the_field_types():
     convert = bench.methods._convert
     assert convert("none", int | None, "x") is None

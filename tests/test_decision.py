@@ -12,6 +12,8 @@ import pytest
 import egnc
 import egnc.nonlinear.marginals as marginals_module
 import egnc.robust.decision as decision_module
+import egnc.robust.readmission as readmission_module
+import egnc.robust.rounds as rounds_module
 from egnc.api import marginal_covariances, solve
 from egnc.datasets import add_false_loops, grid_world
 from egnc.graph import PoseGraph
@@ -31,10 +33,10 @@ from egnc.robust.decision import (
     sequentially_consistent,
     truncated_cost,
 )
-from egnc.robust.gnc import START_OPTIONS, GncOptions
+from egnc.robust.gnc import GncOptions
 from egnc.robust.kernels import chi2_quantile
 
-GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
+GUESS_ONLY = GncOptions(starts=())
 """The decision from the initial guess alone."""
 
 FACTOR_BACKENDS = [
@@ -43,7 +45,7 @@ FACTOR_BACKENDS = [
 ]
 """Backends the covariance tests run on."""
 
-OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, chordal_start=False, elimination_start=False)
+OLD_RULE = GncOptions(outlier_quantile=0.95, readmit=False, starts=("runs", "chordal-all", "regrouped"))
 """The decision before re-admission and the other starts: the Geman-McClure classification at
 chi2.ppf(0.95), re-checked by r^2."""
 
@@ -237,7 +239,7 @@ def test_a_corrupted_odometry_edge_is_reported_not_hidden():
     # the message says which start the decision came from. The GNC stage from the chordal map
     # of the loops in runs (the default) reaches the same decision.
     first = solve(corrupted)
-    result = solve(corrupted, gnc_options=GncOptions(runs_start=False))
+    result = solve(corrupted, gnc_options=GncOptions(starts=("chordal", "chordal-all", "regrouped", "elimination")))
     assert result.start == "chordal" and "chordal initialization" in result.message
     assert first.start == "runs" and "loop closures in runs" in first.message
     np.testing.assert_array_equal(first.inliers, result.inliers)
@@ -342,7 +344,7 @@ def test_a_cycle_of_classifications_ends_at_the_lower_truncated_cost(monkeypatch
         solved.append((~rejected, truncated_cost(r, robust, 3, 0.99)))
         return rejected
 
-    monkeypatch.setattr(decision_module, "readmitted", readmit_all)
+    monkeypatch.setattr(rounds_module, "readmitted", readmit_all)
     factors = BetweenFactors.from_graph(graph)
     inliers = ~corrupted.is_outlier
     decision = decide_outliers(
@@ -436,7 +438,7 @@ def test_rounds_that_readmit_loops_share_one_analysis_on_large_systems(monkeypat
     # one symbolic analysis) serves every round. On a small one each round's problem holds its
     # accepted edges only.
     if shared:  # this grid's 1200 unknowns stand for a large system
-        monkeypatch.setattr(decision_module, "SHARED_ANALYSIS_MIN_UNKNOWNS", 1200)
+        monkeypatch.setattr(rounds_module, "SHARED_ANALYSIS_MIN_UNKNOWNS", 1200)
     world = grid_world(2, 400, seed=2, noise_scale=0.5)
     corrupted = add_false_loops(world.graph, 20, seed=4, reference_poses=solve(world.graph, "l2").graph.poses)
     graph, robust = corrupted.graph, corrupted.graph.is_loop_closure
@@ -447,9 +449,9 @@ def test_rounds_that_readmit_loops_share_one_analysis_on_large_systems(monkeypat
     built, estimated = [], []
     over = decision_module.RoundProblem.over
     monkeypatch.setattr(decision_module.RoundProblem, "over", lambda *args: built.append(args) or over(*args))
-    estimate = decision_module.ReachEstimate.of
+    estimate = rounds_module.ReachEstimate.of
     counted = classmethod(lambda cls, problem: estimated.append(problem) or estimate(problem))
-    monkeypatch.setattr(decision_module.ReachEstimate, "of", counted)
+    monkeypatch.setattr(rounds_module.ReachEstimate, "of", counted)
     decision = decide_outliers(
         graph, to_matrices(2, start), robust, SolverOptions(), GncOptions(), "auto", factors, inliers=inliers
     )
@@ -501,7 +503,7 @@ def test_the_bounds_that_spare_covariance_solves_hold():
     assert np.all(alone <= r * r * (1 + 1e-12))
     well_determined = np.trace(S_kk - own, axis1=1, axis2=2) <= np.trace(own, axis1=1, axis2=2)
     assert 10 < well_determined.sum() < len(e)  # both kinds
-    floor = decision_module._statistic_floor(loops, poses)
+    floor = readmission_module.statistic_floor(loops, poses)
     assert np.all(floor <= alone * (1 + 1e-12))
     assert np.any(floor > chi2_quantile(0.9999, d))  # the floor does spare false loops
 
@@ -533,16 +535,16 @@ def test_a_batch_whose_only_possible_loops_fail_alone_is_not_solved(monkeypatch,
     assert np.all(r[moved] ** 2 > threshold)  # none fits without its covariance
     problem = Problem.from_graph(kept)
     solved_loops: list[tuple[int, bool]] = []
-    batch_innovations = decision_module._batch_innovations
+    batch_innovations = readmission_module._batch_innovations
 
     def counted(problem, poses, factors, batch, covariance, export=True):
         solved_loops.append((len(batch), export))
         return batch_innovations(problem, poses, factors, batch, covariance, export)
 
-    monkeypatch.setattr(decision_module, "_batch_innovations", counted)
+    monkeypatch.setattr(readmission_module, "_batch_innovations", counted)
     scouted = decision_module.readmitted(problem, poses, factors, left_out, r, 0.9999)
     assert solved_loops == solved
-    monkeypatch.setattr(decision_module, "SCOUT_LOOPS", 0)
+    monkeypatch.setattr(readmission_module, "SCOUT_LOOPS", 0)
     solved_loops.clear()
     unscouted = decision_module.readmitted(problem, poses, factors, left_out, r, 0.9999)
     assert solved_loops == [(1, True), (64, True)]
@@ -591,7 +593,7 @@ def test_readmission_credits_the_map_with_no_more_uncertainty_than_the_loops_own
     r = factors.whitened_norms(factors.residuals(poses))
     np.testing.assert_allclose(r[loops] ** 2, [30.0, 300.0, 200.0])
     threshold = chi2_quantile(0.9999, 3)
-    e, S = innovations(problem, poses, factors.subset(loops), decision_module.covariance_solver(problem, poses))
+    e, S = innovations(problem, poses, factors.subset(loops), readmission_module.covariance_solver(problem, poses))
     own = np.linalg.inv(factors.information[loops])
     block = np.arange(3)[:, None] * 3 + np.arange(3)
     ratios = np.trace(S[block[:, :, None], block[:, None, :]] - own, axis1=1, axis2=2) / np.trace(own, axis1=1, axis2=2)

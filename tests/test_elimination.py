@@ -15,7 +15,7 @@ from egnc.nonlinear.marginals import innovations, relative_covariances
 from egnc.robust.elimination import STEP_BUDGET, deletion_statistics
 from egnc.robust.gnc import GncOptions
 
-WITHOUT_ELIMINATION = GncOptions(elimination_start=False)
+WITHOUT_ELIMINATION = GncOptions(starts=("runs", "chordal", "chordal-all", "regrouped"))
 """The default before the elimination start."""
 
 

@@ -7,7 +7,9 @@ as True: each now fails at once with one `OptionError` naming the field.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import warnings
 from dataclasses import fields
 from pathlib import Path
 
@@ -51,11 +53,11 @@ BAD_SOLVER_OPTIONS = [
 BAD_GNC_OPTIONS = [
     ("warm_start", "no"),
     ("warm_start", 0),
-    ("chordal_start", "no"),
-    ("chordal_all_start", 0),
-    ("elimination_start", 1),
-    ("regroup_start", "on"),
-    ("runs_start", 1),
+    ("starts", "chordal"),
+    ("starts", None),
+    ("starts", ("chordal", "nearest")),
+    ("starts", ("chordal", "chordal")),
+    ("starts", ("chordal", "runs")),
     ("refine", None),
     ("readmit", "yes"),
     ("every_stage", 1.0),
@@ -87,6 +89,45 @@ def test_every_bad_solver_option_is_refused_naming_the_field(name, value):
 def test_every_bad_gnc_option_is_refused_naming_the_field(name, value):
     with pytest.raises(OptionError, match=rf"GncOptions\.{name}\b"):
         GncOptions(**{name: value})
+
+
+DEPRECATED_START_FLAGS = [
+    ("chordal_start", "no"),
+    ("chordal_all_start", 0),
+    ("elimination_start", 1),
+    ("regroup_start", "on"),
+    ("runs_start", 1),
+]
+"""The former booleans of the starts: still checked while they are accepted."""
+
+
+@pytest.mark.parametrize(("name", "value"), DEPRECATED_START_FLAGS)
+def test_a_bad_deprecated_start_flag_is_refused_naming_it(name, value):
+    with pytest.raises(OptionError, match=rf"GncOptions\.{name}\b"):
+        GncOptions(**{name: value})
+
+
+def test_an_unknown_start_is_refused_listing_the_known_ones():
+    with pytest.raises(OptionError, match="unknown start 'nearest'") as refused:
+        GncOptions(starts=("chordal", "nearest"))
+    for name in ("runs", "chordal", "chordal-all", "regrouped", "elimination"):
+        assert repr(name) in str(refused.value)
+
+
+def test_the_deprecated_start_flags_warn_and_switch_starts():
+    with pytest.warns(DeprecationWarning, match=r"starts=\('runs', 'chordal-all', 'regrouped', 'elimination'\)"):
+        without_chordal = GncOptions(chordal_start=False)
+    assert without_chordal == GncOptions(starts=("runs", "chordal-all", "regrouped", "elimination"))
+    with pytest.warns(DeprecationWarning, match="starts="):
+        all_off = GncOptions(
+            runs_start=False, chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
+        )
+    assert all_off.starts == ()
+    with pytest.warns(DeprecationWarning):
+        assert dataclasses.replace(all_off, runs_start=True, elimination_start=True).starts == ("runs", "elimination")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # replacing another field keeps the starts, silently
+        assert dataclasses.replace(without_chordal, c=2.0).starts == without_chordal.starts
 
 
 def test_every_field_is_covered_by_a_bad_value():

@@ -14,7 +14,7 @@ from egnc.nonlinear.chordal import chordal_initialization
 from egnc.nonlinear.factors import BetweenFactors, to_matrices
 from egnc.nonlinear.least_squares import SolverOptions
 from egnc.robust.decision import Decision, StartContext, truncated_cost
-from egnc.robust.gnc import GncOptions
+from egnc.robust.gnc import START_NAMES, GncOptions
 from egnc.robust.kernels import chi2_quantile
 from egnc.robust.regroup import (
     MIN_RUN,
@@ -108,7 +108,7 @@ def test_false_loops_side_by_side_by_chance_are_not_a_run():
     assert np.bincount(by_position).max() >= MIN_RUN
     result = solve(corrupted.graph)
     assert result.start != "regrouped"
-    without = solve(corrupted.graph, gnc_options=GncOptions(regroup_start=False))
+    without = solve(corrupted.graph, gnc_options=GncOptions(starts=("runs", "chordal", "chordal-all", "elimination")))
     np.testing.assert_array_equal(result.inliers, without.inliers)
     assert np.count_nonzero(result.inliers[corrupted.is_outlier]) == 0
 
@@ -153,7 +153,7 @@ def test_a_guess_without_runs_or_better_than_their_map_is_kept(dataset_path):
     # MIT's 20 loops form no run: nothing changes, bit for bit.
     mit = egnc.read_g2o(dataset_path("MIT.g2o"))
     assert runs_start(_context(mit), to_matrices(2, mit.poses)) is None
-    result, without = solve(mit), solve(mit, gnc_options=GncOptions(runs_start=False))
+    result, without = solve(mit), solve(mit, gnc_options=GncOptions(starts=START_NAMES[1:]))
     assert result.start == without.start == "guess" and result.stages[0].start == "guess"
     np.testing.assert_array_equal(result.graph.poses, without.graph.poses)
     # A grid whose guess is its least-squares optimum has runs, but no map of fewer edges fits better.

@@ -19,13 +19,17 @@ from egnc.nonlinear.least_squares import Problem, SolverOptions
 from egnc.nonlinear.marginals import pose_covariances
 from egnc.robust.decision import Decision, StartContext, truncated_cost
 from egnc.robust.diagnostics import solve_warnings
-from egnc.robust.gnc import START_OPTIONS, GncOptions, StageStart, run_gnc
+from egnc.robust.gnc import START_NAMES, START_OPTIONS, GncOptions, StageStart, run_gnc
 from egnc.robust.kernels import chi2_quantile
+from egnc.robust.pipeline import GUESS, STARTS
 from egnc.robust.schedules import make_schedule
 from egnc.robust.starts import ALL_EDGES_SHARE, all_edges_decision
 
-GUESS_ONLY = GncOptions(**dict.fromkeys(START_OPTIONS, False))
+GUESS_ONLY = GncOptions(starts=())
 """The default before the chordal start: decide from the GNC solve of the initial guess alone."""
+
+WITHOUT_RUNS = GncOptions(starts=START_NAMES[1:])
+"""The default without the runs start: the GNC stage starts from the guess."""
 
 
 def drifted_guess(graph: PoseGraph, seed: int, heading_sigma: float) -> PoseGraph:
@@ -51,7 +55,7 @@ def test_a_drifted_guess_no_longer_decides_the_result(dataset_path):
     graph = drifted_guess(egnc.read_g2o(dataset_path("manhattanOlson3500.g2o")), seed=2, heading_sigma=0.1)
     guess_only = solve(graph, gnc_options=GUESS_ONLY)
     result = solve(graph)
-    chordal = solve(graph, gnc_options=GncOptions(runs_start=False))
+    chordal = solve(graph, gnc_options=WITHOUT_RUNS)
     least_squares = solve(graph, "l2", init="chordal")
     assert len(guess_only.rejected_edges) > 100
     # The GNC stage starts from the chordal map of the loops in runs; without that start, the
@@ -68,13 +72,13 @@ def test_false_loops_keep_the_decision_of_the_first_start():
     clean = solve(world.graph, "l2")
     corrupted = add_false_loops(world.graph, 30, seed=4, reference_poses=clean.graph.poses)
     for first in ("runs", "guess"):
-        options = GncOptions(runs_start=first == "runs")
+        options = GncOptions() if first == "runs" else WITHOUT_RUNS
         result = solve(corrupted.graph, gnc_options=options)
         np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
         assert result.start == first
         # the chordal map accepts no loop the decision rejects: the chordal start stops before its probe
         assert "probe" not in [stage.kind for stage in result.stages]
-        first_only = dataclasses.replace(GUESS_ONLY, runs_start=options.runs_start)
+        first_only = GncOptions(starts=options.starts[:1] if first == "runs" else ())
         np.testing.assert_array_equal(result.graph.poses, solve(corrupted.graph, gnc_options=first_only).graph.poses)
 
 
@@ -86,7 +90,8 @@ def test_the_chordal_start_wins_back_a_true_loop_after_the_runs_start(dataset_pa
     corrupted = add_false_loops(graph, 10, seed=1, reference_poses=reference)
     robust = corrupted.graph.is_loop_closure
     result = solve(corrupted.graph)
-    without = solve(corrupted.graph, gnc_options=GncOptions(chordal_start=False))
+    without_chordal = GncOptions(starts=tuple(name for name in START_NAMES if name != "chordal"))
+    without = solve(corrupted.graph, gnc_options=without_chordal)
     assert result.start == "chordal"
     np.testing.assert_array_equal(robust & ~result.inliers, corrupted.is_outlier)
     assert np.count_nonzero(robust & ~without.inliers & ~corrupted.is_outlier) == 1
@@ -131,7 +136,7 @@ def test_manhattan_with_a_noisy_heading_keeps_every_loop(dataset_path):
     # from the chordal guess keeps them all.
     graph = drifted_guess(egnc.read_g2o(dataset_path("manhattanOlson3500.g2o")), seed=1, heading_sigma=0.3)
     least_squares = solve(graph, "l2", init="chordal")
-    for options, start in ((GncOptions(), "runs"), (GncOptions(runs_start=False), "chordal")):
+    for options, start in ((GncOptions(), "runs"), (WITHOUT_RUNS, "chordal")):
         result = solve(graph, gnc_options=options)
         assert len(result.rejected_edges) == 0 and result.start == start
         assert result.cost == pytest.approx(least_squares.cost, rel=1e-6)
@@ -211,3 +216,45 @@ def test_the_all_edges_start_does_not_run_without_reason(monkeypatch):
     monkeypatch.setattr("egnc.robust.decision.chordal_initialization", _never_called)
     context, many_rejected, _ = _all_edges_start(graph, rejected_loops=int(ALL_EDGES_SHARE * loops) + 1)
     assert all_edges_decision(context, many_rejected, _never_called) == (None, ())
+
+
+def test_no_starts_is_the_old_all_off_configuration():
+    world = grid_world(2, 200, seed=5, noise_scale=0.3)
+    clean = solve(world.graph, "l2")
+    corrupted = add_false_loops(world.graph, 30, seed=6, reference_poses=clean.graph.poses)
+    result = solve(corrupted.graph, linear_solver="scipy", gnc_options=GUESS_ONLY)
+    with pytest.warns(DeprecationWarning, match="starts=()"):
+        all_off = GncOptions(**dict.fromkeys(START_OPTIONS, False))
+    old = solve(corrupted.graph, linear_solver="scipy", gnc_options=all_off)
+    np.testing.assert_array_equal(result.graph.poses, old.graph.poses)
+    assert result.start == old.start == "guess" and len(result.stages) == len(old.stages) == 2
+    np.testing.assert_array_equal(~result.inliers, corrupted.is_outlier)
+    # the cost the five booleans all False gave before `GncOptions.starts` (commit 6ea427b)
+    assert result.cost == pytest.approx(213401.54865559706, rel=1e-9)
+    assert result.truncated_cost == pytest.approx(179.63764647726347, rel=1e-9)
+
+
+def test_every_start_is_one_named_strategy_in_the_registry():
+    assert tuple(STARTS) == START_NAMES == GncOptions().starts
+    for name, start in STARTS.items():
+        assert start.name == name and callable(start.propose) and start.description
+
+
+def test_the_starts_propose_in_the_order_given_after_the_guess(monkeypatch):
+    graph = drifted_guess(grid_world(2, 300, seed=1).graph, seed=2, heading_sigma=0.5)
+    proposed: list[str] = []
+
+    def recorded(start):
+        def propose(search):
+            proposed.append(start.name)
+            return type(start).propose(start, search)
+
+        return propose
+
+    for start in (GUESS, *STARTS.values()):
+        monkeypatch.setattr(start, "propose", recorded(start))
+    for starts in (("elimination", "chordal"), ("runs", "regrouped", "chordal-all"), ()):
+        proposed.clear()
+        result = solve(graph, gnc_options=GncOptions(starts=starts))
+        expected = ["guess", *starts] if starts[:1] != ("runs",) else ["runs", "guess", *starts[1:]]
+        assert proposed == expected and result.start in ("guess", *starts)

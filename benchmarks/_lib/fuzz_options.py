@@ -52,11 +52,7 @@ VALID: dict[str, tuple[object, ...]] = {
     "readmit_quantile": (0.9, 0.9999),
     "readmit_false_alarms": (0.01, 1.0, 100.0, None),
     "warm_start": (True, False),
-    "runs_start": (True, False),
-    "chordal_start": (True, False),
-    "chordal_all_start": (True, False),
-    "elimination_start": (True, False),
-    "regroup_start": (True, False),
+    "starts": ((), ("chordal",), ("runs", "elimination"), ("elimination", "chordal"), ["regrouped"]),
     "every_stage": (True, False),
     "stage_rel_cost_tol": (0.0, 1e-6, 1e-3, None),
 }
@@ -82,11 +78,7 @@ INVALID: dict[str, tuple[object, ...]] = {
     "readmit_quantile": (0.0, 1.0, *_NUMBER),
     "readmit_false_alarms": (0.0, -1.0, NAN, INF, -INF, "1", True, [1.0]),  # None: per loop only
     "warm_start": ("no", 0, None),
-    "runs_start": ("on", 1, None),
-    "chordal_start": ("yes", 1, None),
-    "chordal_all_start": (0, "on"),
-    "elimination_start": ("no", 0.0),
-    "regroup_start": (1, "off"),
+    "starts": ("chordal", ("nearest",), ("chordal", "runs"), ("chordal", "chordal"), ("chordal", 3), None, 1),
     "every_stage": (1.0, "True"),
     "stage_rel_cost_tol": (-1e-6, NAN, INF, -INF, "1e-6", True, [1.0]),  # None: chosen by the protocol
 }

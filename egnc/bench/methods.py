@@ -55,7 +55,8 @@ def parse_method(spec: str) -> MethodSpec:
     """Parse `name` or `name[field=value,...]` into a `MethodSpec`.
 
     Values are converted to the type of the `GncOptions` field (`none` for an optional field,
-    `true`/`false` for a flag) and the options are validated at once.
+    `true`/`false` for a flag, `chordal+regrouped` or `()` for `starts`) and the options are
+    validated at once.
 
     Raises:
         EgncError: unknown method or option, a value of the wrong type, or options GncOptions rejects.
@@ -111,7 +112,14 @@ def parse_methods(text: str) -> tuple[MethodSpec, ...]:
 
 
 def _convert(text: str, kind: object, what: str) -> object:
-    """Convert an option value to the annotated type (`float`, `int`, `bool`, `str`, `X | None`)."""
+    """Convert an option value to the annotated type (`float`, `int`, `bool`, `str`, `X | None`,
+    a deprecated keyword argument's `InitVar[X]`, or a tuple of names written `a+b`, `()` for none)."""
+    if isinstance(kind, dataclasses.InitVar):
+        kind = kind.type
+    if typing.get_origin(kind) is tuple:
+        item = typing.get_args(kind)[0]
+        items = [] if text.strip() == "()" else [part.strip() for part in text.split("+")]
+        return tuple(_convert(part, item, what) for part in items)
     union = isinstance(kind, types.UnionType) or typing.get_origin(kind) is typing.Union
     options = typing.get_args(kind) if union else (kind,)
     if type(None) in options and text.lower() == "none":

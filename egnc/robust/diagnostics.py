@@ -86,25 +86,38 @@ def solve_warnings(
             f"the least-squares cost over the accepted edges rose from {initial_cost:.6g} at the initial guess"
             f" to {final_cost:.6g}: the solve made the guess worse"
         )
-    known = ~robust
-    bound = KNOWN_INLIER_FACTOR * chi2_quantile(0.99, graph.tangent_dim)
-    if np.any(final_r[known] ** 2 > bound):
-        worst = np.flatnonzero(known)[np.argmax(final_r[known])]
-        i, j = graph.vertex_ids[graph.edges[worst]]
-        warnings.append(
-            f"{int(np.count_nonzero(final_r[known] ** 2 > bound))} known-inlier edges (odometry) disagree with the"
-            f" map: edge {worst} ({i} -> {j}) has r^2 = {final_r[worst] ** 2:.3g}, over {bound:.3g}; a corrupted"
-            " measurement, or information matrices far too confident"
-        )
+    warnings += _known_inliers_disagree(graph, ~robust, final_r)
     if num_loops and np.all(initial_fits[robust]):
-        extent = _extent(graph.poses, graph.dim)
-        moved = ate(result_poses, graph.poses, graph.dim)
-        if extent > 0 and moved > MOVED_FRACTION * extent:
-            warnings.append(
-                f"every loop closure fits the initial guess, yet the result moved {moved:.3g} m (ATE) from it,"
-                f" {100 * moved / extent:.1f}% of the trajectory's extent"
-            )
+        warnings += _moved_far(graph, result_poses)
     return tuple(warnings)
+
+
+def _known_inliers_disagree(graph: PoseGraph, known: np.ndarray, final_r: np.ndarray) -> list[str]:
+    """The warning, if any, about known inliers `known` `(E,)` whose `r^2` at the result exceeds
+    `KNOWN_INLIER_FACTOR` times `chi2.ppf(0.99, d)`."""
+    bound = KNOWN_INLIER_FACTOR * chi2_quantile(0.99, graph.tangent_dim)
+    if not np.any(final_r[known] ** 2 > bound):
+        return []
+    worst = np.flatnonzero(known)[np.argmax(final_r[known])]
+    i, j = graph.vertex_ids[graph.edges[worst]]
+    return [
+        f"{int(np.count_nonzero(final_r[known] ** 2 > bound))} known-inlier edges (odometry) disagree with the"
+        f" map: edge {worst} ({i} -> {j}) has r^2 = {final_r[worst] ** 2:.3g}, over {bound:.3g}; a corrupted"
+        " measurement, or information matrices far too confident"
+    ]
+
+
+def _moved_far(graph: PoseGraph, result_poses: np.ndarray) -> list[str]:
+    """The warning, if any, that the result `(N, P)` moved more than `MOVED_FRACTION` of the
+    trajectory's extent from the initial guess (asked where every loop fits that guess)."""
+    extent = _extent(graph.poses, graph.dim)
+    moved = ate(result_poses, graph.poses, graph.dim)
+    if not (extent > 0 and moved > MOVED_FRACTION * extent):
+        return []
+    return [
+        f"every loop closure fits the initial guess, yet the result moved {moved:.3g} m (ATE) from it,"
+        f" {100 * moved / extent:.1f}% of the trajectory's extent"
+    ]
 
 
 def _listed(ids: np.ndarray, most: int = 5) -> str:

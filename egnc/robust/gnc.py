@@ -18,13 +18,14 @@ References:
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import InitVar, dataclass
 from typing import Literal
 
 import numpy as np
 
-from egnc.errors import EgncError
+from egnc.errors import EgncError, OptionError, OptionTypeError
 from egnc.graph import PoseGraph
 from egnc.graph.checks import check_bool, check_choice, check_float, check_int
 from egnc.nonlinear.factors import BetweenFactors
@@ -33,14 +34,31 @@ from egnc.nonlinear.least_squares import (
     IterationCallback,
     Problem,
     SolverOptions,
+    SolverResult,
     solve_least_squares,
 )
 from egnc.robust.losses import FixedWeightLoss, KernelLoss
 from egnc.robust.schedules import FIXED_LAST_STAGE_METHODS, Schedule, Stage, ThresholdConvention, exceeds
 
-START_OPTIONS = ("runs_start", "chordal_start", "chordal_all_start", "regroup_start", "elimination_start")
-"""The `GncOptions` fields that switch the starts other than the initial guess; all False gives
-the decision from the GNC stage of the initial guess alone (`GncOptions(**dict.fromkeys(START_OPTIONS, False))`)."""
+StartName = Literal["runs", "chordal", "chordal-all", "regrouped", "elimination"]
+"""A start of the outlier decision other than the initial guess (`egnc.robust.pipeline`)."""
+
+START_NAMES: tuple[StartName, ...] = ("runs", "chordal", "chordal-all", "regrouped", "elimination")
+"""Every start `GncOptions.starts` accepts, in the default order (`egnc.robust.pipeline.STARTS`)."""
+
+DEPRECATED_START_FLAGS: dict[str, StartName] = {
+    "runs_start": "runs",
+    "chordal_start": "chordal",
+    "chordal_all_start": "chordal-all",
+    "regroup_start": "regrouped",
+    "elimination_start": "elimination",
+}
+"""The booleans that switched the starts before `GncOptions.starts` (deprecated, kept for one
+release) and the start each switches."""
+
+START_OPTIONS = tuple(DEPRECATED_START_FLAGS)
+"""Deprecated: the former `GncOptions` booleans of the starts. `GncOptions(starts=())` is the
+decision from the GNC stage of the initial guess alone."""
 
 
 @dataclass(frozen=True)
@@ -92,32 +110,16 @@ class GncOptions:
             only through the next stage's loss, and egnc's and riSAM's last stage puts every
             loop at `mu = 1` whatever came before: only that stage is solved (the same poses
             and decision as solving every stage, bit for bit; docs/method.md).
-        runs_start: with `refine`, start the GNC stage from the chordal initialization of the
-            known inliers and the loop closures that come in runs agreeing with each other
-            (`egnc.robust.regroup.runs_start`) instead of the initial guess, where that map has the
-            lower truncated least-squares cost: it reads the guess only between poses a few
-            rows apart, so a drifted guess does not decide which basin the stage settles in.
-            Where that start's decision rejects a whole run, the GNC stage also runs from the
-            guess, and the decision of lower truncated cost is kept.
-        chordal_start: with `refine`, where the chordal initialization (which does not read
-            the initial guess) accepts loops that the first decision rejects, decide a second
-            time from there with those loops added to the first decision's, and keep the
-            decision of lower truncated least-squares cost (`egnc.robust.starts`): from a drifted guess
-            the GNC stage can settle in a wrong basin that the decision rounds confirm.
-        chordal_all_start: with `refine`, where the best decision so far rejects a few loops,
-            run the GNC stage again from the chordal initialization of every edge and decide
-            from there, if that map fits better than the initial guess (`egnc.robust.starts`), and keep
-            it if its truncated cost is lower: a GNC stage from a drifted guess can switch off
-            true loops that no map of the trusted edges brings back.
-        regroup_start: with `refine`, decide once more with the rejected loops that come in runs
-            (both ends within a few poses of each other's) put back together, from the chordal
-            initialization over them and the accepted edges (`egnc.robust.regroup`), where such runs
-            exist, and keep it if its truncated cost is lower.
-        elimination_start: with `refine`, decide once more by backward elimination from least
-            squares over every edge (`egnc.robust.elimination`) where that is cheap (few loop closures),
-            and keep it if its truncated cost is lower: on a weakly constrained map least squares
-            fits false loops that the other starts' robust stage keeps out, at the price of
-            honest loops the map cannot vouch for.
+        starts: with `refine`, the starts that try to beat the decision from the initial guess,
+            in the order they run (`egnc.robust.pipeline`; `START_NAMES`, all by default). Each
+            proposes a classification from poses of its own; the decision of lowest truncated
+            least-squares cost is kept (`Result.start` names it). `"runs"`, which must come first,
+            starts the GNC stage from the chordal map of the loops that come in runs where that
+            fits better than the guess; `"chordal"` decides from the chordal initialization of the
+            trusted edges; `"chordal-all"` runs the GNC stage again from the chordal
+            initialization of every edge; `"regrouped"` puts rejected runs of loops back together;
+            `"elimination"` eliminates loops backwards from least squares over every edge.
+            `()` decides from the initial guess alone.
         every_stage: solve every stage of the schedule even when, under restarts, only the last
             one decides the result: to watch the graduation stage by stage (same result, more time).
         stage_rel_cost_tol: graduated methods with `refine`: each GNC stage stops when its
@@ -126,8 +128,13 @@ class GncOptions:
             `refine` the stages do). None (default): chosen by the stage protocol
             (`stage_tolerance`).
 
+    Deprecated keyword arguments (one release): `runs_start`, `chordal_start`,
+    `chordal_all_start`, `regroup_start`, `elimination_start`. Each adds its start to `starts`
+    (True) or removes it (False), with a `DeprecationWarning`.
+
     Every field is checked at construction (bools must be bools, `max_stages` an int, the
-    numbers finite); a wrong type or value raises `OptionError` naming the field.
+    numbers finite, `starts` known names); a wrong type or value raises `OptionError` naming the
+    field.
     """
 
     c: float = 3.0
@@ -140,16 +147,29 @@ class GncOptions:
     readmit_quantile: float = 0.9999
     readmit_false_alarms: float | None = 1.0
     warm_start: bool = False
-    runs_start: bool = True
-    chordal_start: bool = True
-    chordal_all_start: bool = True
-    regroup_start: bool = True
-    elimination_start: bool = True
+    starts: tuple[StartName, ...] = START_NAMES
     every_stage: bool = False
     stage_rel_cost_tol: float | None = None
+    runs_start: InitVar[bool | None] = None
+    chordal_start: InitVar[bool | None] = None
+    chordal_all_start: InitVar[bool | None] = None
+    regroup_start: InitVar[bool | None] = None
+    elimination_start: InitVar[bool | None] = None
 
-    def __post_init__(self) -> None:
+    def __post_init__(
+        self,
+        runs_start: bool | None,
+        chordal_start: bool | None,
+        chordal_all_start: bool | None,
+        regroup_start: bool | None,
+        elimination_start: bool | None,
+    ) -> None:
         """Check every field's type and range (`egnc.graph.checks`), storing plain Python values."""
+        flags = dict(
+            zip(
+                DEPRECATED_START_FLAGS, (runs_start, chordal_start, chordal_all_start, regroup_start, elimination_start)
+            )
+        )
         checked: dict[str, object] = {
             "c": check_float("GncOptions.c", self.c, 0.0, open_low=True),
             "max_stages": check_int("GncOptions.max_stages", self.max_stages, 1),
@@ -165,10 +185,51 @@ class GncOptions:
         for name in ("outlier_quantile", "readmit_quantile"):
             value = getattr(self, name)
             checked[name] = check_float(f"GncOptions.{name}", value, 0.0, 1.0, open_low=True, open_high=True)
-        for name in ("refine", "readmit", "warm_start", *START_OPTIONS, "every_stage"):
+        for name in ("refine", "readmit", "warm_start", "every_stage"):
             checked[name] = check_bool(f"GncOptions.{name}", getattr(self, name))
+        checked["starts"] = _with_flags(check_starts(self.starts), flags)
         for name, value in checked.items():
             object.__setattr__(self, name, value)
+
+
+def check_starts(starts: object) -> tuple[StartName, ...]:
+    """`starts` as a tuple of known start names, `"runs"` first if given.
+
+    Raises:
+        OptionError: not a sequence of strings, an unknown or repeated name, or `"runs"` not first.
+    """
+    known = ", ".join(repr(name) for name in START_NAMES)
+    if isinstance(starts, str) or not isinstance(starts, (tuple, list)):
+        raise OptionTypeError(f"GncOptions.starts must be a tuple of start names ({known}), got {starts!r:.60}")
+    for name in starts:
+        if name not in START_NAMES:
+            raise OptionError(f"GncOptions.starts has an unknown start {name!r:.40}; known starts: {known}")
+    if len(set(starts)) != len(starts):
+        raise OptionError(f"GncOptions.starts names a start twice: {tuple(starts)!r}")
+    if "runs" in starts and starts[0] != "runs":
+        raise OptionError("GncOptions.starts must list 'runs' first (it chooses where the GNC stage starts)")
+    return tuple(starts)
+
+
+def _with_flags(starts: tuple[StartName, ...], flags: dict[str, bool | None]) -> tuple[StartName, ...]:
+    """`starts` switched by the deprecated booleans `flags` (None: not given): False removes a
+    start, True adds a missing one where `START_NAMES` puts it."""
+    given = {flag: value for flag, value in flags.items() if value is not None}
+    if not given:
+        return starts
+    switched = dict.fromkeys(starts, True)
+    for flag, value in given.items():
+        switched[DEPRECATED_START_FLAGS[flag]] = check_bool(f"GncOptions.{flag}", value)
+    chosen = [name for name in starts if switched[name]]
+    added = [name for name in START_NAMES if switched.get(name) and name not in starts]
+    # an added start goes where the default order puts it: "runs" first, the others after those given
+    result = (*[name for name in added if name == "runs"], *chosen, *[name for name in added if name != "runs"])
+    warnings.warn(
+        f"GncOptions({', '.join(given)}) is deprecated and will be removed: use starts={result!r}",
+        DeprecationWarning,
+        stacklevel=4,
+    )
+    return result
 
 
 RESTARTED_STAGE_TOL = 1e-4
@@ -342,18 +403,7 @@ def run_gnc(
         solution = solve_least_squares(problem, from_poses, stage.loss, solver_options, on_iteration)
         poses = solution.poses
         r = factors.whitened_norms(factors.residuals(poses))
-        reports.append(
-            StageReport(
-                *_mu_stats(stage, robust),
-                iterations=solution.iterations,
-                cost=solution.cost,
-                time_s=time.perf_counter() - started,
-                status=solution.status,
-                active_edges=graph.num_edges,
-                cg_iterations=solution.linear.cg_iterations,
-                start=start,
-            )
-        )
+        reports.append(_stage_report(stage, robust, solution, started, graph.num_edges, start))
         if on_stage is not None:
             on_stage(reports[-1])
         for phase, seconds in solution.timings.items():
@@ -376,6 +426,23 @@ def run_gnc(
         status=status,
         message=message,
         timings=timings,
+    )
+
+
+def _stage_report(
+    stage: Stage, robust: np.ndarray, solution: SolverResult, started: float, active_edges: int, start: StageStart
+) -> StageReport:
+    """The `StageReport` of `stage`, solved as `solution` over `active_edges` edges from the
+    `time.perf_counter()` reading `started`; `robust` `(E,)` picks the edges of its `mu` statistics."""
+    return StageReport(
+        *_mu_stats(stage, robust),
+        iterations=solution.iterations,
+        cost=solution.cost,
+        time_s=time.perf_counter() - started,
+        status=solution.status,
+        active_edges=active_edges,
+        cg_iterations=solution.linear.cg_iterations,
+        start=start,
     )
 
 

@@ -19,7 +19,7 @@ lower. It costs one chordal solve and the decision rounds, and runs only where r
 exist; a run of false loops (riSAM's "group" variant) bends the chordal map and loses the
 comparison.
 
-The same runs give the GNC stage a start of its own (`runs_start`, `GncOptions.runs_start`).
+The same runs give the GNC stage a start of its own (`runs_start`, the `"runs"` of `GncOptions.starts`).
 From a guess that has drifted far the stage settles where the drift puts it, and tears the map
 there (above); the starts after it repair the decision at the price of their own rounds (a
 100 000-pose grid at 30 %: 47.6 s against 3.1 s clean, the regrouped start deciding). Before
