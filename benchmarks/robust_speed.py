@@ -96,7 +96,7 @@ def run_robust(case: dict) -> dict:
     from egnc.datasets import add_false_loops
     from egnc.metrics import ate, precision_recall
     from egnc.nonlinear.least_squares import SolverOptions
-    from egnc.robust.gnc import START_OPTIONS, GncOptions
+    from egnc.robust.gnc import GncOptions
 
     analyses = [0]
 
@@ -130,7 +130,7 @@ def run_robust(case: dict) -> dict:
         "ate": ate(robust.graph.poses[: graph.num_poses], reference_poses, graph.dim),
     }
     direct = SolverOptions(linear_method="direct")
-    guess_only = GncOptions(**dict.fromkeys(START_OPTIONS, False))
+    guess_only = GncOptions(starts=())
     variants = {"direct": (direct, GncOptions()), "before": (SolverOptions(), guess_only)}
     for name in ("direct", "before"):
         if case[name]:

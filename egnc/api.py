@@ -322,4 +322,4 @@ def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = No
     if graph.fixed.all():  # no unknowns: every covariance is zero
         return np.zeros((len(rows), graph.tangent_dim, graph.tangent_dim))
     problem = Problem.from_graph(graph.subgraph_edges(result.inliers), result.linear_solver)
-    return pose_covariances(problem, to_matrices(graph.dim, graph.poses), rows)
+    return pose_covariances(problem, to_matrices(graph.dim, graph.poses), rows, graph.vertex_ids)

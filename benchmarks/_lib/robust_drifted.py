@@ -10,10 +10,9 @@ deviation), this prints the loop closures each method rejects and the least-squa
 reaches, relative to the least-squares optimum (the lower of `l2` from the guess and from the
 chordal initialization):
 
-- `egnc`: the default (`egnc.solve`), with its other starts (`egnc.robust.gnc.START_OPTIONS`:
-  `GncOptions.runs_start`, `chordal_start`, `chordal_all_start`, `regroup_start`,
-  `elimination_start`);
-- `guess only`: the default before them (all off);
+- `egnc`: the default (`egnc.solve`), with its other starts (`GncOptions.starts`: runs, chordal,
+  chordal-all, regrouped, elimination);
+- `guess only`: the default before them (`GncOptions(starts=())`);
 - `gtsam-gnc-tls`: GTSAM's GncLMOptimizer (TLS, known inliers = odometry), rejected = loops whose
   `r^2 > chi2.ppf(0.99, d)` at its solution (its own inlier rule); `gtsam-lm`: GTSAM's LM from the
   same guess, over every edge.
@@ -37,7 +36,7 @@ from egnc.graph import PoseGraph
 from egnc.lie import so3
 from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.nonlinear.initialize import initialize_poses
-from egnc.robust.gnc import START_OPTIONS, GncOptions
+from egnc.robust.gnc import GncOptions
 from egnc.robust.kernels import chi2_quantile
 
 NEEDS_REPAIR = {"cubicle": "nearest-pd"}
@@ -70,8 +69,8 @@ def drifted(graph: PoseGraph, kind: str, level: float, seed: int) -> PoseGraph:
 
 def solve_egnc(graph: PoseGraph, method: str, init: str, other_starts: bool) -> dict:
     """One egnc solve (child process): rejected loops, all-edge cost, start, time, warnings."""
-    starts = dict.fromkeys(START_OPTIONS, other_starts)
-    result = egnc.solve(graph, method, init=init, gnc_options=GncOptions(**starts))
+    options = GncOptions() if other_starts else GncOptions(starts=())
+    result = egnc.solve(graph, method, init=init, gnc_options=options)
     return {
         "rejected": len(result.rejected_edges),
         "cost": result.cost,
