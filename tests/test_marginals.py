@@ -285,7 +285,7 @@ def test_poses_the_accepted_edges_cut_off_are_named_not_the_backends_failure(bac
     apart = dataclasses.replace(result, inliers=result.inliers & ~cut_off)
     with pytest.raises(
         GraphError,
-        match=r"^marginal_covariances: the poses in rows \{4\.\.5\} of the graph \(2 of 30, in 2 parts of the graph\)"
+        match=r"^marginal_covariances: poses \{4\.\.5\} \(2 of 30, in 2 parts of the graph\)"
         r" have no path of accepted edges to a fixed pose, so they have no covariance; accept an edge joining them"
         r" to the rest, or hold one pose of each part fixed$",
     ):
