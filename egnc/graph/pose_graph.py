@@ -169,7 +169,8 @@ class PoseGraph:
         """The reader's checks (`egnc.graph.validity`), on the arrays not already checked by another graph."""
         if not self.num_edges:
             raise GraphError(f"no edges: {NO_EDGES}")
-        if "vertex_ids" in new and np.any(np.diff(self.vertex_ids) <= 0):
+        # Compared, not subtracted: np.diff of int64 ids wraps around at the limits (int64 min to 1 is negative).
+        if "vertex_ids" in new and np.any(self.vertex_ids[1:] <= self.vertex_ids[:-1]):
             raise GraphError("vertex_ids must be sorted ascending and unique")
         if self.edges.min() < 0 or self.edges.max() >= self.num_poses:
             raise GraphError("edges refer to vertex rows outside [0, N)")
@@ -212,7 +213,10 @@ class PoseGraph:
         """`(E,)` bool: edges joining consecutive ids in either direction (`id_j == id_i +/- 1`),
         the known inliers by default."""
         ids = self.vertex_ids[self.edges]
-        return (ids[:, 1] == ids[:, 0] + 1) | (ids[:, 0] == ids[:, 1] + 1)
+        low, high = ids.min(axis=1), ids.max(axis=1)
+        # `high - 1` cannot wrap unless high is int64's minimum, and then it is not `low`; `low + 1`
+        # would wrap at int64's maximum and call an edge from the largest id to the smallest odometry.
+        return high - 1 == low
 
     @property
     def is_loop_closure(self) -> np.ndarray:
