@@ -13,6 +13,7 @@ egnc's tangent vectors (`[v, omega]`), so no permutation is ever applied.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -93,6 +94,16 @@ def _first_non_bool(source: np.ndarray) -> str:
     return f"got {describe(source)}"  # not reached for an array `_zeros_and_ones` refused
 
 
+def _lines(value: object) -> tuple[str, ...]:
+    """`unknown_lines` as a tuple of str; a str itself is refused (a tuple of it is one character a line)."""
+    if isinstance(value, (str, bytes, bytearray)) or not isinstance(value, Sequence):
+        raise GraphError(f"unknown_lines must be a sequence of lines (str), got a {type(value).__name__}")
+    for k, line in enumerate(value):
+        if not isinstance(line, str):
+            raise GraphError(f"unknown_lines must hold lines (str): element {k} is {describe(line)}")
+    return tuple(value)
+
+
 def _is_owned(value: object) -> bool:
     """Whether `value` is an array some `PoseGraph` made with `_private_copy`."""
     return isinstance(value, np.ndarray) and _OWNED.get(id(value)) is value
@@ -163,7 +174,7 @@ class PoseGraph:
             if actual != shape:
                 raise GraphError(f"{name} has shape {actual}, expected {shape}")
         self._check_edges(new)
-        object.__setattr__(self, "unknown_lines", tuple(map(str, self.unknown_lines)))
+        object.__setattr__(self, "unknown_lines", _lines(self.unknown_lines))
 
     def _check_edges(self, new: set[str]) -> None:
         """The reader's checks (`egnc.graph.validity`), on the arrays not already checked by another graph."""
