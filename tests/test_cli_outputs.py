@@ -256,6 +256,26 @@ def test_odometry_that_does_not_reach_every_pose_names_the_file(tmp_path):
     assert_one_line_error(run, f"egnc-solve: error: {graph}: init 'odometry': cannot initialize")
 
 
+REPLAY_ERROR = """
+from egnc.errors import EgncError
+def failing(*args, **kwargs):
+    raise EgncError("the replay did not take in every pose of the graph")
+cli.replay = failing
+"""
+
+
+@pytest.mark.parametrize("resumed", [False, True])
+def test_replay_errors_name_the_input_and_the_checkpoint_resumed_from(tmp_path, resumed):
+    """Issue 56: a replay's own errors named no file; after a resume the checkpoint may be at fault."""
+    checkpoint = tmp_path / "run.npz"
+    if resumed:
+        checkpoint.write_bytes(b"a checkpoint")  # the stub never reads it
+    run = finish(run_with_stub(REPLAY_ERROR, GRID2D, "--online", "-q", "--checkpoint", checkpoint))
+    tail = f" (resumed from the checkpoint {checkpoint})" if resumed else ""
+    expected = f"egnc-solve: error: {GRID2D}: the replay did not take in every pose of the graph{tail}"
+    assert (run.returncode, run.stderr.splitlines()) == (1, [expected])
+
+
 # --- Strict JSON, warnings, honest summary --------------------------------------------------------------
 
 INFINITE_INITIAL_COST = """

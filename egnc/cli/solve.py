@@ -302,12 +302,13 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         if hint is not None:
             print(f"hint: {hint}", file=sys.stderr, flush=True)  # before the solve: it explains a long one
         read_count = len(caught)
+        resumed = args.checkpoint if args.checkpoint is not None and args.checkpoint.exists() else None
         try:
             result, outcome = _solve(args, graph, known_inliers)
         except EgncError as error:
             # a replay numbers the edges in the order it adds them (`replay_steps`), a batch solve in file order
             order = np.concatenate(replay_steps(graph, _mask(known_inliers, graph))) if args.online else None
-            raise located(error, args.input, graph, [args.checkpoint], order) from None
+            raise located(error, args.input, graph, [args.checkpoint], order, resumed) from None
     _require_finite(result, args.input)
     report = report_dict(result, read_notes + _warning_notes(caught[read_count:]), outcome)
     written, output_notes = plan.write(result, graph, report)
@@ -359,6 +360,7 @@ def located(
     graph: PoseGraph,
     own_paths: list[Path | None],
     edge_order: np.ndarray | None = None,
+    resumed: Path | None = None,
 ) -> EgncError:
     """`error` of a solve of the graph read from `input_path`, its message led by `<file>[:<line>]: `.
 
@@ -371,6 +373,8 @@ def located(
         graph: the graph read from it (`edge_lines`).
         own_paths: other files an error may name itself (None entries ignored).
         edge_order: `(E,)` the file index of each edge as the solve numbers them (None: file order).
+        resumed: the checkpoint a replay resumed from, if any: its state may be at fault, so the
+            message names it too.
     """
     message = str(error)
     if any(path is not None and message.startswith(f"{path}:") for path in (input_path, *own_paths)):
@@ -380,6 +384,8 @@ def located(
         edge = int(edge_order[edge]) if 0 <= edge < len(edge_order) else None
     line = int(graph.edge_lines[edge]) if edge is not None and 0 <= edge < graph.num_edges else 0
     where = f"{input_path}:{line}" if line > 0 else f"{input_path}"
+    if resumed is not None:
+        message = f"{message} (resumed from the checkpoint {resumed})"
     # `main` tells only numerical failures (exit 3) from the other errors (exit 1)
     return (
         NumericalError(f"{where}: {message}") if isinstance(error, NumericalError) else EgncError(f"{where}: {message}")
