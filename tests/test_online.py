@@ -821,3 +821,15 @@ def test_an_absurd_but_finite_entry_is_refused_at_add_not_in_update(entry):
     solver.add_loop(4, 0, [-3.0, 0.0, 0.0], np.eye(3))
     report = solver.update()
     assert report.status in (1, 2, 3) and np.isfinite(solver.poses).all()
+
+
+def test_a_prior_that_moves_the_map_out_of_double_precision_is_refused():
+    solver = OnlineSolver(2)
+    solver.add_pose(0, [0.0, 0.0, 0.0])
+    solver.add_odometry(0, 1, [1.0, 0.0, 0.0], np.eye(3))
+    solver.update()
+    with pytest.raises(egnc.NumericalError, match="^prior on pose 0: moved onto it, the map cannot be represented"):
+        solver.add_prior(0, [1e300, 0.0, 0.0])
+    solver.add_prior(0, [5.0, 0.0, 0.0])
+    solver.update()
+    np.testing.assert_allclose(solver.poses[:, 0], [5.0, 6.0])

@@ -165,16 +165,22 @@ class Intake:
         if not len(pairs):
             return
         dim = self.dim
-        step = np.abs(values[:, :dim]).max(axis=1).tolist()
+        step = np.abs(values[:, :dim]).max(axis=1)
+        rows = np.array([estimate.row.get(end, -1) for end in pairs.ravel().tolist()], dtype=np.int64)
+        in_map = np.abs(estimate.T[np.maximum(rows, 0), :dim, dim]).max(axis=1) if len(estimate.T) else rows * 0.0
+        scale = np.maximum(step, np.where(rows >= 0, in_map, 0.0).reshape(-1, 2).max(axis=1))
         root = math.sqrt(dim)  # times the largest coordinate, it bounds a step's length
-        scale = np.empty(len(pairs))
         reach = dict(self._reach)  # not kept unless the whole batch passes
-        for k, (i, j) in enumerate(pairs.tolist()):
-            ends = [self._magnitude(end, estimate, reach) for end in (i, j)]
-            for end, other in ((i, ends[1]), (j, ends[0])):
-                if end not in estimate.row and end not in reach and other is not None:
-                    reach[end] = min(other + root * step[k], _LARGEST)  # placed by composing this edge
-            scale[k] = max(step[k], *(self._magnitude(end, estimate, reach) or 0.0 for end in (i, j)))
+        for k in np.flatnonzero((rows < 0).reshape(-1, 2).any(axis=1)).tolist():  # edges to poses not in the map
+            i, j = pairs[k].tolist()
+            ends = [
+                float(in_map[2 * k + e]) if rows[2 * k + e] >= 0 else reach.get(end) for e, end in enumerate((i, j))
+            ]
+            for e, end in enumerate((i, j)):
+                other = ends[1 - e]
+                if ends[e] is None and other is not None:
+                    ends[e] = reach[end] = min(other + root * float(step[k]), _LARGEST)  # placed by composing this edge
+            scale[k] = max(float(scale[k]), *(end or 0.0 for end in ends))
         found = coarse_edges(scale, info, dim)
         if found is not None:
             count, worst, why = found
@@ -186,13 +192,6 @@ class Intake:
                 first + worst,
             )
         self._reach = reach
-
-    def _magnitude(self, vertex: int, estimate: Estimate, reach: dict[int, float]) -> float | None:
-        """The largest coordinate of pose `vertex` `(m)`: in the map, given, or bounded; None if not known yet."""
-        row = estimate.row.get(vertex)
-        if row is not None:
-            return float(np.abs(estimate.T[row, : self.dim, self.dim]).max())
-        return reach.get(vertex)
 
     def _poses_array(self, values: ArrayLike, count: int, name: str) -> np.ndarray:
         """`values` as `(count, P)` float64 poses, finite, with quaternions that normalize in 3D."""
