@@ -17,7 +17,7 @@ import numpy as np
 
 from egnc.errors import EgncError, GraphError, OptionError
 from egnc.graph import PoseGraph
-from egnc.graph.checks import check_callable, check_choice, check_instance
+from egnc.graph.checks import check_callable, check_choice, check_instance, check_vertex_ids
 from egnc.graph.health import check_representable
 from egnc.io import read_g2o
 from egnc.linalg.linear_solvers import resolve_name
@@ -313,7 +313,7 @@ def marginal_covariances(result: Result, ids: np.ndarray | list[int] | None = No
             requested = np.asarray(None)
         if requested.dtype.kind not in "iu" or requested.ndim > 1:
             raise OptionError(f"ids must be a vertex id or a 1-D sequence of them (integers), got {ids!r:.60}")
-    ids = graph.vertex_ids if ids is None else np.asarray(ids, dtype=np.int64).reshape(-1)
+    ids = graph.vertex_ids if ids is None else check_vertex_ids("ids", ids).reshape(-1)
     rows = np.searchsorted(graph.vertex_ids, ids)
     rows = np.minimum(rows, graph.num_poses - 1)
     missing = ids[graph.vertex_ids[rows] != ids]

@@ -215,6 +215,67 @@ def test_numerical_failure_exits_3_in_one_line_without_output(tmp_path, stub, fr
     assert list(tmp_path.iterdir()) == []
 
 
+FAR_POSE = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1e20 0 0\nEDGE_SE2 0 1 1 0 0 100 0 0 100 0 100\n"
+"""An edge whose 0.1 m standard deviation a double cannot hold at x = 1e20 m (line 3)."""
+
+
+FAR_STEP = (
+    "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 1 0 1e20 0 0 100 0 0 100 0 100\n"
+)
+"""Replayed, the second odometry edge (line 4, a duplicate: one warning) measures a step of 1e20 m to 0.1 m."""
+
+UNREPRESENTABLE = {
+    "batch": (FAR_POSE, [], 3),
+    "batch-with-warning": (FAR_POSE.replace("\nEDGE", "\nVERTEX_SE2 5 0 0 0\nEDGE"), [], 4),  # 5 is untouched
+    "online-with-warning": (FAR_STEP, ["--online"], 4),
+}
+
+
+@pytest.mark.parametrize("case", sorted(UNREPRESENTABLE))
+def test_unrepresentable_edge_is_one_line_naming_file_and_line(tmp_path, case):
+    """Issue 56: the failure named no file, and a warning (the untouched vertex 5, the duplicate
+    edge) came before it: a failure is one line."""
+    text, options, line = UNREPRESENTABLE[case]
+    graph = tmp_path / "far.g2o"
+    graph.write_text(text)
+    run = egnc_solve(graph, "-o", tmp_path / "out.g2o", "-q", *options)
+    assert run.returncode == 3, run.stderr
+    assert run.stderr.startswith(f"egnc-solve: numerical failure: {graph}:{line}: "), run.stderr
+    assert "cannot be represented in double precision" in run.stderr
+    assert len(run.stderr.splitlines()) == 1, run.stderr
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["far.g2o"]
+
+
+def test_odometry_that_does_not_reach_every_pose_names_the_file(tmp_path):
+    graph = tmp_path / "o.g2o"
+    graph.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n"
+        "EDGE_SE2 0 2 2 0 0 1 0 0 1 0 1\nEDGE_SE2 2 1 -1 0 0 1 0 0 1 0 1\n"
+    )
+    run = egnc_solve(graph, "--init", "odometry", "-q")
+    assert_one_line_error(run, f"egnc-solve: error: {graph}: init 'odometry': cannot initialize")
+
+
+REPLAY_ERROR = """
+from egnc.errors import EgncError
+def failing(*args, **kwargs):
+    raise EgncError("the replay did not take in every pose of the graph")
+cli.replay = failing
+"""
+
+
+@pytest.mark.parametrize("resumed", [False, True])
+def test_replay_errors_name_the_input_and_the_checkpoint_resumed_from(tmp_path, resumed):
+    """Issue 56: a replay's own errors named no file; after a resume the checkpoint may be at fault."""
+    checkpoint = tmp_path / "run.npz"
+    if resumed:
+        checkpoint.write_bytes(b"a checkpoint")  # the stub never reads it
+    run = finish(run_with_stub(REPLAY_ERROR, GRID2D, "--online", "-q", "--checkpoint", checkpoint))
+    tail = f" (resumed from the checkpoint {checkpoint})" if resumed else ""
+    expected = f"egnc-solve: error: {GRID2D}: the replay did not take in every pose of the graph{tail}"
+    assert (run.returncode, run.stderr.splitlines()) == (1, [expected])
+
+
 # --- Strict JSON, warnings, honest summary --------------------------------------------------------------
 
 INFINITE_INITIAL_COST = """

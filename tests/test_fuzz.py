@@ -56,9 +56,11 @@ def test_solutions_are_finite_or_a_reported_failure(outcomes):
     assert non_finite == []
 
 
-def test_invalid_mutants_are_refused_and_fix_all_has_nothing_to_optimize(outcomes):
+def test_invalid_mutants_are_refused_valid_ones_read_and_fix_all_has_nothing_to_optimize(outcomes):
     invalid = [outcome for outcome in outcomes if outcome.operator in fuzz_files.INVALID_OPERATORS]
     assert invalid and all(outcome.read == "clean error" for outcome in invalid)
+    valid = [outcome for outcome in outcomes if outcome.operator in fuzz_files.VALID_OPERATORS]
+    assert valid and all(outcome.read == "graph" for outcome in valid)  # ids at int64's limits (issue 56)
     fixed = [outcome for outcome in outcomes if outcome.operator == "fix all" and outcome.read == "graph"]
     assert fixed and all(solve == "nothing to optimize" for outcome in fixed for solve in outcome.solves)
 
@@ -94,7 +96,9 @@ def test_api_fuzz_every_misuse_is_a_one_line_egnc_error(tmp_path):
         warnings.simplefilter("ignore")
         results = fuzz_api.fuzz_api(400, SEED, tmp_path)
     assert {case.kind for case in results} == set(fuzz_api.misuses(*_api_arguments(tmp_path)))
-    assert [(case.kind, case.outcome) for case in results if case.outcome != "clean error"] == []
+    valid = [case.outcome for case in results if case.kind in fuzz_api.VALID_CALLS]
+    assert valid and set(valid) == {"valid call returned"}  # empty batches (issue 56)
+    assert [(case.kind, case.outcome) for case in results if case.outcome not in ("clean error", *valid)] == []
 
 
 def _api_arguments(tmp_path: Path) -> tuple:

@@ -186,3 +186,28 @@ def test_fixed_must_be_bools_or_zeros_and_ones_naming_the_first_that_is_not():
             dataclasses.replace(chain(), fixed=fixed)
     graph = dataclasses.replace(chain(), fixed=[0, 1, 0, 0.0])
     np.testing.assert_array_equal(graph.fixed, [False, True, False, False])
+
+
+INT64 = np.iinfo(np.int64)
+
+
+def test_ids_at_the_int64_limits_are_valid_and_never_wrap(tmp_path):
+    """Issue 56: `np.diff` of `[int64 min, 1]` wrapped to a negative step, refusing valid ids; and
+    `id + 1` at int64's maximum made an edge from the largest id to the smallest "odometry"."""
+    graph = PoseGraph(2, [INT64.min, 1], np.zeros((2, 3)), [[0, 1]], [[1.0, 0.0, 0.0]], [np.eye(3)])
+    assert graph.is_odometry.tolist() == [False]
+    ends = PoseGraph(
+        2, [INT64.min, INT64.min + 1, INT64.max - 1, INT64.max], np.zeros((4, 3)),
+        [[1, 0], [0, 3], [3, 0], [2, 3], [1, 2]], np.tile([1.0, 0.0, 0.0], (5, 1)), np.tile(np.eye(3), (5, 1, 1)),
+    )  # fmt: skip
+    assert ends.is_odometry.tolist() == [True, False, False, True, False]
+    with pytest.raises(GraphError, match="vertex_ids must be sorted ascending and unique"):
+        PoseGraph(2, [INT64.max, INT64.min], np.zeros((2, 3)), [[0, 1]], [[1.0, 0.0, 0.0]], [np.eye(3)])
+    path = tmp_path / "limits.g2o"
+    path.write_text(
+        f"VERTEX_SE2 {INT64.min} 0 0 0\nVERTEX_SE2 {INT64.max} 1 0 0\n"
+        f"EDGE_SE2 {INT64.min} {INT64.max} 1 0 0 1 0 0 1 0 1\n"
+    )
+    read = read_g2o(path)
+    assert read.vertex_ids.tolist() == [INT64.min, INT64.max]
+    assert solve(read, "l2").converged

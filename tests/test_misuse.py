@@ -121,6 +121,29 @@ def test_marginal_covariances_ids_that_are_not_vertex_ids_are_named(ids):
     assert marginal_covariances(result, np.int64(3)).shape == (1, 3, 3)
 
 
+def test_marginal_covariances_ids_outside_int64_are_refused_not_wrapped():
+    """Issue 56: uint64 `2**64 - 1` became id -1 and returned that vertex's covariance."""
+    graph = egnc.PoseGraph(2, [-1, 0], np.zeros((2, 3)), [[0, 1]], [[1.0, 0.0, 0.0]], [np.eye(3)])
+    result = solve(graph, "l2")
+    for ids in (np.array([2**64 - 1], dtype=np.uint64), [2**63], np.uint64(2**63)):
+        with pytest.raises(OptionError, match=r"^ids: \d+ is outside int64"):
+            marginal_covariances(result, ids)
+    for ids in ([-(2**63) - 1], [0, 2**70]):  # Python ints beyond 64 bits: NumPy holds them as objects
+        with pytest.raises(OptionError, match="^ids"):
+            marginal_covariances(result, ids)
+    assert marginal_covariances(result, np.array([0], dtype=np.uint64)).shape == (1, 3, 3)
+    assert marginal_covariances(result, [-1]).shape == (1, 3, 3)
+
+
+def test_unknown_lines_given_as_one_string_are_refused():
+    """Issue 56: `unknown_lines="LANDMARK"` was kept as eight lines of one character each."""
+    arrays = (2, [0, 1], np.zeros((2, 3)), [[0, 1]], [[1.0, 0.0, 0.0]], [np.eye(3)])
+    for lines in ("LANDMARK", b"LANDMARK", None, ["VERTEX_XY 9 1 2", 3]):
+        with pytest.raises(egnc.GraphError, match="^unknown_lines must"):
+            egnc.PoseGraph(*arrays, unknown_lines=lines)  # type: ignore[arg-type]
+    assert egnc.PoseGraph(*arrays, unknown_lines=["VERTEX_XY 9 1 2"]).unknown_lines == ("VERTEX_XY 9 1 2",)
+
+
 def test_keep_edges_of_the_wrong_shape_is_an_option_error(tmp_path):
     graph = read_g2o(GRID2D)
     with pytest.raises(OptionError, match=r"keep_edges must be a boolean mask of shape"):

@@ -759,3 +759,77 @@ def test_an_older_loop_a_region_pushes_past_the_line_sends_the_update_to_the_who
     assert edges[:3] == [10, 10, 10] and edges[3:] == [stage.active_edges for stage in whole_report.stages]
     np.testing.assert_array_equal(local.poses, whole.poses)
     assert local.residual_norms[59] ** 2 > line
+
+
+def started_2d() -> OnlineSolver:
+    """A 2D solver with a prior on pose 0 and odometry to poses 1 and 2, updated."""
+    solver = OnlineSolver(2)
+    solver.add_prior(0, [0.0, 0.0, 0.0])
+    solver.add_odometry_batch([[0, 1], [1, 2]], [[1.0, 0.0, 0.0]] * 2, [np.eye(3)] * 2)
+    solver.update()
+    return solver
+
+
+def test_empty_batches_add_nothing():
+    """Issue 56: `add_loops([], [], [])` was refused as "vertex ids must be integers, got float64"."""
+    solver = started_2d()
+    assert solver.add_loops([], [], []).tolist() == []
+    assert solver.add_odometry_batch(np.zeros((0, 2), dtype=int), np.zeros((0, 3)), np.zeros((0, 3, 3))).tolist() == []
+    solver.add_poses([], [])
+    solver.add_poses([])
+    report = solver.update()
+    assert (report.new_poses, len(report.new_edges), solver.num_poses, solver.num_edges) == (0, 0, 3, 2)
+    assert solver.add_loop(0, 2, [2.0, 0.0, 0.0], np.eye(3)) == 2
+
+
+def test_ids_outside_int64_are_named_so():
+    """Issue 56: `add_loop(2**63, ...)` was refused as "vertex ids must be integers, got float64"."""
+    solver = started_2d()
+    calls = (
+        lambda: solver.add_loop(2**63, 0, [1.0, 0.0, 0.0], np.eye(3)),
+        lambda: solver.add_pose(2**64),
+        lambda: solver.add_loops(np.array([[2**63, 0]], dtype=np.uint64), [[1.0, 0.0, 0.0]], [np.eye(3)]),
+    )
+    for call in calls:
+        with pytest.raises(GraphError, match=r"^vertex ids?: \d+ is outside int64"):
+            call()
+    with pytest.raises(GraphError, match="^vertex ids must be integers, got float64"):
+        solver.add_loops([[0.0, 2.0]], [[1.0, 0.0, 0.0]], [np.eye(3)])
+
+
+@pytest.mark.parametrize(
+    "entry",
+    ["loop measurement", "loop information", "odometry measurement", "odometry information", "far pose"],
+)
+def test_an_absurd_but_finite_entry_is_refused_at_add_not_in_update(entry):
+    """Issue 56: a measurement of 1e300 or information of 1e300 I was taken in, and the update failed."""
+    solver = started_2d()
+    far, sure = [1e300, 0.0, 0.0], 1e300 * np.eye(3)
+    with pytest.raises(egnc.NumericalError, match="cannot be represented in double precision"):
+        if entry == "loop measurement":
+            solver.add_loop(0, 2, far, np.eye(3))
+        elif entry == "loop information":
+            solver.add_loop(0, 2, [2.0, 0.0, 0.0], sure)
+        elif entry == "odometry measurement":
+            solver.add_odometry(2, 3, far, np.eye(3))
+        elif entry == "odometry information":
+            solver.add_odometry(2, 3, [1.0, 0.0, 0.0], sure)
+        else:
+            solver.add_pose(3, far)
+            solver.add_odometry(2, 3, [1.0, 0.0, 0.0], np.eye(3))
+    solver.add_odometry(2, 4, [1.0, 0.0, 0.0], np.eye(3))  # what was refused left nothing behind
+    solver.add_loop(4, 0, [-3.0, 0.0, 0.0], np.eye(3))
+    report = solver.update()
+    assert report.status in (1, 2, 3) and np.isfinite(solver.poses).all()
+
+
+def test_a_prior_that_moves_the_map_out_of_double_precision_is_refused():
+    solver = OnlineSolver(2)
+    solver.add_pose(0, [0.0, 0.0, 0.0])
+    solver.add_odometry(0, 1, [1.0, 0.0, 0.0], np.eye(3))
+    solver.update()
+    with pytest.raises(egnc.NumericalError, match="^prior on pose 0: moved onto it, the map cannot be represented"):
+        solver.add_prior(0, [1e300, 0.0, 0.0])
+    solver.add_prior(0, [5.0, 0.0, 0.0])
+    solver.update()
+    np.testing.assert_allclose(solver.poses[:, 0], [5.0, 6.0])

@@ -8,13 +8,15 @@ wrong-shaped arrays; and `PoseGraph`s made directly or with `dataclasses.replace
 graph with one array broken (information not positive definite, self-loops, no edges, ids
 unsorted, rows out of range, shapes wrong, a zero quaternion, NaN); and the online solver
 (`egnc.online`) built with junk options, given junk or inconsistent entries, asked for a result,
-a checkpoint or a load with junk arguments, and `egnc.online.replay.replay` with one junk argument.
-Each must end in an
+a checkpoint or a load with junk arguments, and `egnc.online.replay.replay` with one junk argument;
+since issue 56 also ids of uint64 beyond int64 (on a graph holding the id they would wrap to), a
+str where a sequence of str or ids belongs, and empty `add_*` batches. Each must end in an
 `EgncError` (egnc's argument errors, `OptionError`, are `TypeError`s or `ValueError`s too) with
 a one-line message, within `fuzz_core.TIME_LIMIT_S`; anything else is a bug: a `TypeError` or
 `ValueError` egnc did not raise itself ("foreign error": NumPy's words, naming no argument),
 another exception ("crash", e.g. an `AttributeError` from inside), a hang, a multi-line message,
-or a call that returns (a "converged" result counted apart).
+or a call that returns (a "converged" result counted apart). The calls that are valid by
+construction (`VALID_CALLS`: empty batches) must return; an error is a bug ("refused valid").
 
 Run from `benchmarks/fuzz.py --target api`; `tests/test_fuzz.py` runs fewer cases.
 """
@@ -43,8 +45,14 @@ JUNK: tuple[object, ...] = (
     None, 0, -1, 2.5, float("nan"), True, "", "x", b"bytes", [], [1, 2], {}, {"max_iterations": 5}, (None,),
     object(), np.zeros(3), np.array([[1.0]]), np.array(["a"]), egnc.SolverOptions(), egnc.GncOptions(), print,
 )  # fmt: skip
-CLASSES = ("clean error", "returned", "returned converged", "multi-line message", "foreign error", "crash", "hang")
-BAD = CLASSES[1:]
+CLASSES = ("clean error", "valid call returned", "returned", "returned converged", "refused valid",
+           "multi-line message", "foreign error", "crash", "hang")  # fmt: skip
+BAD = CLASSES[2:]
+VALID_CALLS = ("OnlineSolver: empty batch",)
+"""Misuse names whose calls are valid: an empty batch is natural in a front-end's loop (issue 56)."""
+UINT64_BEYOND = (np.array([2**64 - 1], dtype=np.uint64), np.array([2**63], dtype=np.uint64), [2**64 - 1],
+                 np.uint64(2**64 - 1))  # fmt: skip
+"""Ids NumPy would wrap to int64's negative ids (`2**64 - 1` to -1) were they converted unchecked."""
 
 
 @dataclass
@@ -116,12 +124,18 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
     path = SHIPPED_DATASETS / "grid2d.g2o"
     out = folder / "out.g2o"
     small = graph.first_poses(20)  # a replay needs every pose on an edge
+    # ids -1 and -2**63 exist here: a uint64 id wrapped to them would find a vertex
+    shifted = egnc.solve(dataclasses.replace(small, vertex_ids=small.vertex_ids + np.iinfo(np.int64).min), "l2")
+    wrapped = egnc.solve(dataclasses.replace(small, vertex_ids=small.vertex_ids - 1), "l2")
     return {
+        **_issue56_misuses(graph, result, shifted, wrapped),
         "solve: graph": lambda rng: egnc.solve(_junk(rng, not_=(str,))),  # type: ignore[arg-type]
         "solve: options": lambda rng: egnc.solve(graph, options=_junk(rng, not_=(egnc.SolverOptions,))),  # type: ignore[arg-type]
         "solve: gnc_options": lambda rng: egnc.solve(graph, gnc_options=_junk(rng, not_=(egnc.GncOptions,))),  # type: ignore[arg-type]
         "solve: options swapped": lambda rng: egnc.solve(
-            graph, options=egnc.GncOptions(), gnc_options=egnc.SolverOptions()  # type: ignore[arg-type]
+            graph,
+            options=egnc.GncOptions(),
+            gnc_options=egnc.SolverOptions(),  # type: ignore[arg-type]
         ),
         "solve: method": lambda rng: egnc.solve(graph, rng.choice(("EGNC", "gnc", "", None, 1, "l2 "))),  # type: ignore[arg-type]
         "solve: init": lambda rng: egnc.solve(graph, init=rng.choice(("none", None, 0, "File"))),
@@ -129,8 +143,16 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
         "solve: known_inliers": lambda rng: egnc.solve(
             graph,
             known_inliers=rng.choice(
-                ("all", "", np.ones(graph.num_edges - 1, bool), np.ones(graph.num_edges), np.arange(graph.num_edges),
-                 np.ones((graph.num_edges, 1), bool), [True], None)  # fmt: skip
+                (
+                    "all",
+                    "",
+                    np.ones(graph.num_edges - 1, bool),
+                    np.ones(graph.num_edges),
+                    np.arange(graph.num_edges),
+                    np.ones((graph.num_edges, 1), bool),
+                    [True],
+                    None,
+                )  # fmt: skip
             ),
         ),
         "solve: callback": lambda rng: egnc.solve(graph, **{rng.choice(("on_stage", "on_iteration")): _junk(rng)}),
@@ -189,6 +211,46 @@ def misuses(graph: egnc.PoseGraph, result: egnc.Result, folder: Path) -> dict[st
                     folder / "state.npz", meta=rng.choice(([1], "x", {"a": object()}, {"b": b"x"}))
                 ),
                 lambda solver: OnlineSolver.load(rng.choice((_junk(rng, not_=(str,)), path, folder / "none.npz"))),
+            )
+        )(_online()),
+    }
+
+
+def _issue56_misuses(
+    graph: egnc.PoseGraph, result: egnc.Result, shifted: egnc.Result, wrapped: egnc.Result
+) -> dict[str, Callable[[random.Random], object]]:
+    """Issue 56's misuses: uint64 ids beyond int64, a str for a sequence, empty batches (valid)."""
+    eye = np.eye(3)
+    return {
+        "marginal_covariances: uint64 ids": lambda rng: marginal_covariances(
+            rng.choice((shifted, wrapped)), rng.choice(UINT64_BEYOND)
+        ),
+        "PoseGraph: str for a sequence": lambda rng: egnc.PoseGraph(
+            **{**_fields(graph), "unknown_lines": rng.choice(("LANDMARK 1 2", b"LANDMARK", "", "\n"))}
+        ),
+        "str for ids": lambda rng: rng.choice(
+            (
+                lambda: marginal_covariances(result, rng.choice(("0", "01", b"0"))),
+                lambda: _online().add_poses(rng.choice(("2", "23", b"2")), None),
+                lambda: _online().add_loops(rng.choice(("01", "0 1")), [[1.0, 0.0, 0.0]], [eye]),
+            )
+        )(),
+        "OnlineSolver: uint64 ids": lambda rng: rng.choice(
+            (
+                lambda solver: solver.add_loop(
+                    rng.choice((2**63, 2**64 - 1, np.uint64(2**63))), 0, [1.0, 0.0, 0.0], eye
+                ),
+                lambda solver: solver.add_pose(rng.choice(UINT64_BEYOND[3:] + (2**63,))),
+                lambda solver: solver.add_loops(np.array([[2**63, 0]], dtype=np.uint64), [[1.0, 0.0, 0.0]], [eye]),
+                lambda solver: solver.add_poses(rng.choice(UINT64_BEYOND[:3])),
+            )
+        )(_online()),
+        "OnlineSolver: empty batch": lambda rng: rng.choice(
+            (
+                lambda solver: solver.add_loops([], [], []),
+                lambda solver: solver.add_odometry_batch([], [], []),
+                lambda solver: solver.add_poses([], rng.choice(([], None, np.zeros((0, 3))))),
+                lambda solver: solver.add_loops(np.zeros((0, 2), int), np.zeros((0, 3)), np.zeros((0, 3, 3))),
             )
         )(_online()),
     }
@@ -261,13 +323,21 @@ def run_case(call: Callable[[random.Random], object], rng: random.Random) -> str
     return "returned converged" if converged else "returned"
 
 
+def classify(name: str, outcome: str) -> str:
+    """The class of `outcome` for the misuse `name`: a valid call (`VALID_CALLS`) must return."""
+    if name not in VALID_CALLS:
+        return outcome
+    return "valid call returned" if outcome.startswith("returned") else "refused valid"
+
+
 def fuzz_api(cases: int, seed: int, folder: Path) -> list[ApiCase]:
     """Run `cases` misuses, cycling over `misuses` in a seeded random order."""
     rng = random.Random(seed)
     graph = _graph()
     calls = misuses(graph, egnc.solve(graph, "l2"), folder)
     names = sorted(calls)
-    return [ApiCase(name, run_case(calls[name], rng)) for name in (rng.choice(names) for _ in range(cases))]
+    chosen = (rng.choice(names) for _ in range(cases))
+    return [ApiCase(name, classify(name, run_case(calls[name], rng))) for name in chosen]
 
 
 def table(results: list[ApiCase]) -> str:

@@ -3,10 +3,12 @@
 Each mutant is a small g2o or IRL text changed by one random operator (byte flips,
 truncation, deleted, repeated or swapped lines, swapped fields, huge, tiny and non-numeric numbers,
 Unicode separators, CRLF, foreign tags; since issue 19 also integers of 5000 digits, a byte-order
-mark, TORO records, a 2 MiB line, FIX on every vertex and a deleted IRL header line). For each one:
+mark, TORO records, a 2 MiB line, FIX on every vertex and a deleted IRL header line; since issue 56
+the ids moved, in order, to int64's limits). For each one:
 
 - reading must give a `PoseGraph` or an `EgncError`, within `TIME_LIMIT_S` (else a hang); the
-  mutants that are invalid by construction (`INVALID_OPERATORS`) must give the error;
+  mutants that are invalid by construction (`INVALID_OPERATORS`) must give the error, those
+  valid by construction (`VALID_OPERATORS`) the graph;
 - an accepted graph is solved with `l2` and `egnc` (a few iterations per stage): the result must be
   finite or an `EgncError`; its JSON report must be strict JSON; a graph with every vertex fixed
   must come back with the "nothing to optimize" status, not "converged";
@@ -43,8 +45,8 @@ METHODS = ("l2", "egnc")
 SOLVER_OPTIONS = egnc.SolverOptions(max_iterations=5)
 GNC_OPTIONS = egnc.GncOptions(max_stages=8)
 """Few iterations and stages: the fuzzer looks for crashes and non-finite numbers, not optima."""
-BAD_OUTCOMES = ("crash", "hang", "accepted invalid", "non-finite result", "converged with nothing to solve",
-                "stdout output", "invalid JSON")  # fmt: skip
+BAD_OUTCOMES = ("crash", "hang", "accepted invalid", "refused valid", "non-finite result",
+                "converged with nothing to solve", "stdout output", "invalid JSON")  # fmt: skip
 """Outcome classes that are bugs."""
 
 SPECIAL_NUMBERS = (
@@ -55,13 +57,18 @@ SEPARATORS = ("\x1c", "\u2028", "\xa0", "\r", "\x0b", "\t", "\x00")
 OPERATORS = (
     "byte", "truncate", "delete line", "repeat line", "swap lines", "number", "swap fields", "separator", "crlf",
     "foreign line", "scale", "huge integer", "bom", "toro", "long line", "fix all", "drop header line",
+    "int64 ids",
 )  # fmt: skip
 INVALID_OPERATORS = ("huge integer", "long line", "drop header line")
 """Operators whose every mutant is invalid: reading it must fail with an `EgncError`. An integer field
 of 5000 digits is out of range wherever it stands; a 2 MiB line is over the readers' bound; an IRL
 header without one of its five lines shifts the others (without its notes line the PRIOR used to be
 read as the notes)."""
-G2O_ONLY = ("toro", "fix all")
+VALID_OPERATORS = ("int64 ids",)
+"""Operators whose every mutant is valid: reading it must give a graph. Ids moved in order to the
+ends of int64 (issue 56: `[int64 min, 1]` was refused as unsorted, `np.diff` wrapping around)."""
+INT64_MIN, INT64_MAX = int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max)
+G2O_ONLY = ("toro", "fix all", "int64 ids")
 IRL_ONLY = ("drop header line",)
 TORO_ORDER = (0, 1, 3, 5, 2, 4)
 """g2o's upper triangle `I11 I12 I13 I22 I23 I33` to TORO's `I11 I12 I22 I33 I13 I23`."""
@@ -107,6 +114,8 @@ def mutate(text: str, rng: random.Random, irl: bool = False) -> tuple[str, str]:
     operator = rng.choice([name for name in OPERATORS if name not in excluded])
     if operator in ("huge integer", "bom", "toro", "long line", "fix all", "drop header line"):
         return operator, _mutate_issue19(operator, lines, rng)
+    if operator == "int64 ids":
+        return operator, _ids_at_int64_limits(lines, rng)
     if operator == "byte":  # any byte, so invalid UTF-8 too (kept as a surrogate escape until written)
         data = bytearray(text.encode("utf-8", "surrogateescape"))
         data[rng.randrange(len(data))] = rng.randrange(256)
@@ -160,6 +169,44 @@ def _mutate_issue19(operator: str, lines: list[str], rng: random.Random) -> str:
     else:  # drop header line (IRL)
         del lines[rng.randrange(5)]
     return "\n".join(lines)
+
+
+def _ids_at_int64_limits(lines: list[str], rng: random.Random) -> str:
+    """Every vertex id moved, keeping their order, to int64's minimum end, its maximum end, or the
+    lower half to the one and the upper half to the other (a graph as valid as the source)."""
+    ids = sorted({int(field) for line in lines for field in _id_fields(line)[1]})
+    if not ids:
+        return "\n".join(lines)
+    low, high, middle = ids[0], ids[-1], ids[len(ids) // 2]
+    mode = rng.choice(("min", "max", "both"))
+
+    def moved(vertex: int) -> int:
+        if mode == "min" or (mode == "both" and vertex < middle):
+            return INT64_MIN + (vertex - low)
+        return INT64_MAX - (high - vertex)
+
+    out = []
+    for line in lines:
+        fields, positions = line.split(" "), _id_fields(line)[0]
+        for k in positions:
+            fields[k] = str(moved(int(fields[k])))
+        out.append(" ".join(fields))
+    return "\n".join(out)
+
+
+def _id_fields(line: str) -> tuple[list[int], list[str]]:
+    """The positions and texts of the vertex ids of a g2o line (VERTEX*, EDGE*, FIX); none for others."""
+    fields = line.split(" ")
+    if fields[0].startswith("VERTEX"):
+        positions = [1]
+    elif fields[0].startswith("EDGE"):
+        positions = [1, 2]
+    elif fields[0] == "FIX":
+        positions = list(range(1, len(fields)))
+    else:
+        positions = []
+    positions = [k for k in positions if k < len(fields) and fields[k].lstrip("-").isdigit()]
+    return positions, [fields[k] for k in positions]
 
 
 def _toro(line: str) -> str:
@@ -222,7 +269,7 @@ def run_case(text: str, operator: str, folder: Path, irl: bool = False) -> Outco
         except Hang:
             read, solves = ("hang", []) if not solves else (read, [*solves, "hang"])
         except EgncError:
-            read = "clean error"
+            read = "refused valid" if operator in VALID_OPERATORS else "clean error"
         except Exception:  # noqa: BLE001 - the class of failure is the finding
             read = "crash"
     return Outcome(operator, read, solves, stdout=bool(output[0]))
@@ -267,7 +314,7 @@ def bad(outcome: Outcome) -> list[str]:
     return found + (["stdout output"] if outcome.stdout else [])
 
 
-READ_CLASSES = ("graph", "clean error", "accepted invalid", "crash", "hang")
+READ_CLASSES = ("graph", "clean error", "accepted invalid", "refused valid", "crash", "hang")
 SOLVE_CLASSES = (
     "finite", "nothing to optimize", "solver error", "solver failure reported", "non-finite result",
     "converged with nothing to solve", "invalid JSON", "crash", "hang",

@@ -32,6 +32,7 @@ from egnc.cli.report import report_dict, summary
 from egnc.cli.signals import INTERRUPT_EXIT_CODES, Terminated, sigterm_raises
 from egnc.errors import EgncError, EgncWarning, NumericalError
 from egnc.graph import PoseGraph
+from egnc.graph.health import UnrepresentableError
 from egnc.io import read_g2o, read_irl
 from egnc.io.edge_roles import read_known_inliers
 from egnc.io.information import INFORMATION_MODES
@@ -40,7 +41,7 @@ from egnc.linalg.linear_solvers import LINEAR_SOLVERS, resolve_name
 from egnc.linalg.step_solver import LINEAR_METHODS
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.online import ONLINE_METHODS, OnlineOptions
-from egnc.online.replay import CHECKPOINT_EVERY, replay
+from egnc.online.replay import CHECKPOINT_EVERY, ReplayOutcome, replay, replay_steps
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in docs/cli.md)."""
@@ -297,49 +298,98 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         graph, odometry = _read(args)
         known_inliers = odometry if args.known_inliers == "odometry" else _known_inliers(args.known_inliers, graph)
         read_notes = _warning_notes(caught) + _duplicate_note(graph, args.input)
-        _print_warnings(read_notes)  # before the solve: they may explain a long or odd one
         hint = None if args.quiet else cholmod_hint(graph, args.linear_solver, resolve_name("auto") != "scipy")
         if hint is not None:
-            print(f"hint: {hint}", file=sys.stderr, flush=True)
+            print(f"hint: {hint}", file=sys.stderr, flush=True)  # before the solve: it explains a long one
         read_count = len(caught)
-        options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
-        outcome = None
-        if args.online:
-            online_options = OnlineOptions(decide_at_arrival=args.decide_at_arrival)
-            if args.region_hops is not None:
-                online_options = replace(online_options, region_hops=args.region_hops or None)
-            if args.boundary_share is not None:
-                online_options = replace(online_options, boundary_share=args.boundary_share)
-            outcome = replay(
-                graph,
-                args.method,
-                known_inliers=_mask(known_inliers, graph),
-                linear_solver=args.linear_solver,
-                options=options,
-                checkpoint=args.checkpoint,
-                checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY,
-                online_options=online_options,
-                on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
-            )
-            result = outcome.result
-        else:
-            progress = None if args.quiet else Progress(sys.stderr)
-            result = solve(
-                graph,
-                args.method,
-                known_inliers=known_inliers,
-                init=args.init,
-                linear_solver=args.linear_solver,
-                options=options,
-                on_stage=None if progress is None else progress.on_stage,
-                on_iteration=None if progress is None else progress.on_iteration,
-            )
+        resumed = args.checkpoint if args.checkpoint is not None and args.checkpoint.exists() else None
+        try:
+            result, outcome = _solve(args, graph, known_inliers)
+        except EgncError as error:
+            # a replay numbers the edges in the order it adds them (`replay_steps`), a batch solve in file order
+            order = np.concatenate(replay_steps(graph, _mask(known_inliers, graph))) if args.online else None
+            raise located(error, args.input, graph, [args.checkpoint], order, resumed) from None
     _require_finite(result, args.input)
     report = report_dict(result, read_notes + _warning_notes(caught[read_count:]), outcome)
-    _print_warnings(report["warnings"][len(read_notes) :])  # the solve's, the result's, the report's
     written, output_notes = plan.write(result, graph, report)
-    _print_warnings(output_notes)
+    # Only a run that succeeds shows its warnings: a failure is one line (docs/cli.md).
+    _print_warnings(report["warnings"] + output_notes)
     return result, written, report.get("online")
+
+
+def _solve(
+    args: argparse.Namespace, graph: PoseGraph, known_inliers: str | np.ndarray
+) -> tuple[Result, ReplayOutcome | None]:
+    """Solve `graph` in one batch, or replay it with `--online`: the result, and the replay's outcome."""
+    options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
+    if not args.online:
+        progress = None if args.quiet else Progress(sys.stderr)
+        result = solve(
+            graph,
+            args.method,
+            known_inliers=known_inliers,
+            init=args.init,
+            linear_solver=args.linear_solver,
+            options=options,
+            on_stage=None if progress is None else progress.on_stage,
+            on_iteration=None if progress is None else progress.on_iteration,
+        )
+        return result, None
+    online_options = OnlineOptions(decide_at_arrival=args.decide_at_arrival)
+    if args.region_hops is not None:
+        online_options = replace(online_options, region_hops=args.region_hops or None)
+    if args.boundary_share is not None:
+        online_options = replace(online_options, boundary_share=args.boundary_share)
+    outcome = replay(
+        graph,
+        args.method,
+        known_inliers=_mask(known_inliers, graph),
+        linear_solver=args.linear_solver,
+        options=options,
+        checkpoint=args.checkpoint,
+        checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY,
+        online_options=online_options,
+        on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
+    )
+    return outcome.result, outcome
+
+
+def located(
+    error: EgncError,
+    input_path: Path,
+    graph: PoseGraph,
+    own_paths: list[Path | None],
+    edge_order: np.ndarray | None = None,
+    resumed: Path | None = None,
+) -> EgncError:
+    """`error` of a solve of the graph read from `input_path`, its message led by `<file>[:<line>]: `.
+
+    An error about one edge (`UnrepresentableError`) names that edge's line; one whose message
+    already starts with the input or one of `own_paths` (a checkpoint's) is returned unchanged.
+
+    Args:
+        error: what the solve or replay raised.
+        input_path: the input file.
+        graph: the graph read from it (`edge_lines`).
+        own_paths: other files an error may name itself (None entries ignored).
+        edge_order: `(E,)` the file index of each edge as the solve numbers them (None: file order).
+        resumed: the checkpoint a replay resumed from, if any: its state may be at fault, so the
+            message names it too.
+    """
+    message = str(error)
+    if any(path is not None and message.startswith(f"{path}:") for path in (input_path, *own_paths)):
+        return error
+    edge = error.edge if isinstance(error, UnrepresentableError) else None
+    if edge is not None and edge_order is not None:
+        edge = int(edge_order[edge]) if 0 <= edge < len(edge_order) else None
+    line = int(graph.edge_lines[edge]) if edge is not None and 0 <= edge < graph.num_edges else 0
+    where = f"{input_path}:{line}" if line > 0 else f"{input_path}"
+    if resumed is not None:
+        message = f"{message} (resumed from the checkpoint {resumed})"
+    # `main` tells only numerical failures (exit 3) from the other errors (exit 1)
+    return (
+        NumericalError(f"{where}: {message}") if isinstance(error, NumericalError) else EgncError(f"{where}: {message}")
+    )
 
 
 def _check_options(args: argparse.Namespace) -> None:

@@ -14,7 +14,10 @@ from collections.abc import Collection
 
 import numpy as np
 
-from egnc.errors import OptionError, OptionTypeError
+from egnc.errors import EgncError, OptionError, OptionTypeError
+
+INT64_MIN, INT64_MAX = int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max)
+"""The range of a vertex id (`PoseGraph.vertex_ids` is int64)."""
 
 
 def describe(value: object) -> str:
@@ -84,3 +87,38 @@ def check_callable(name: str, value: object) -> None:
     """Refuse `value` unless it is None or callable (a callback)."""
     if value is not None and not callable(value):
         raise OptionTypeError(f"{name} must be callable or None, got {type(value).__name__}")
+
+
+def check_vertex_ids(name: str, value: object, error: type[EgncError] = OptionError) -> np.ndarray:
+    """`value`, a vertex id or an array-like of them, as an int64 array of its shape, checked before conversion.
+
+    Only integers are ids (Python's and NumPy's; not floats, even `2.0`, nor bools or strings),
+    and only those within int64: NumPy would wrap a uint64 `2**64 - 1` to the id -1 and refuse
+    a Python `2**63` as "float64". An empty sequence (`[]`, NumPy's float64) is an empty batch.
+
+    Args:
+        name: the argument's name, for the message.
+        value: what was given.
+        error: the class raised (`OptionError` for arguments, `GraphError` for graph entries).
+
+    Raises:
+        error: `value` is not integers, or an id is outside int64; the message names it.
+    """
+    try:
+        array = np.asarray(value)
+    except (ValueError, OverflowError):  # ragged nesting
+        raise error(f"{name} must be integers, got {describe(value)}") from None
+    if array.size == 0 and array.dtype.kind in "iuf":
+        return array.astype(np.int64)
+    if array.dtype.kind == "O":  # Python ints beyond 64 bits, or mixed objects
+        items = array.ravel().tolist()
+        if not all(isinstance(item, (int, np.integer)) and not isinstance(item, (bool, np.bool_)) for item in items):
+            raise error(f"{name} must be integers, got {describe(value)}")
+        outside = [int(item) for item in items if not INT64_MIN <= item <= INT64_MAX]
+    elif array.dtype.kind in "iu":
+        outside = [int(array.max())] if array.dtype.kind == "u" and array.max() > INT64_MAX else []
+    else:
+        raise error(f"{name} must be integers, got {array.dtype if array.ndim else describe(value)}")
+    if outside:
+        raise error(f"{name}: {outside[0]} is outside int64 [{INT64_MIN}, {INT64_MAX}], the range of vertex ids")
+    return array.astype(np.int64)

@@ -13,6 +13,7 @@ egnc's tangent vectors (`[v, omega]`), so no permutation is ever applied.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -93,6 +94,16 @@ def _first_non_bool(source: np.ndarray) -> str:
     return f"got {describe(source)}"  # not reached for an array `_zeros_and_ones` refused
 
 
+def _lines(value: object) -> tuple[str, ...]:
+    """`unknown_lines` as a tuple of str; a str itself is refused (a tuple of it is one character a line)."""
+    if isinstance(value, (str, bytes, bytearray)) or not isinstance(value, Sequence):
+        raise GraphError(f"unknown_lines must be a sequence of lines (str), got a {type(value).__name__}")
+    for k, line in enumerate(value):
+        if not isinstance(line, str):
+            raise GraphError(f"unknown_lines must hold lines (str): element {k} is {describe(line)}")
+    return tuple(value)
+
+
 def _is_owned(value: object) -> bool:
     """Whether `value` is an array some `PoseGraph` made with `_private_copy`."""
     return isinstance(value, np.ndarray) and _OWNED.get(id(value)) is value
@@ -163,13 +174,14 @@ class PoseGraph:
             if actual != shape:
                 raise GraphError(f"{name} has shape {actual}, expected {shape}")
         self._check_edges(new)
-        object.__setattr__(self, "unknown_lines", tuple(map(str, self.unknown_lines)))
+        object.__setattr__(self, "unknown_lines", _lines(self.unknown_lines))
 
     def _check_edges(self, new: set[str]) -> None:
         """The reader's checks (`egnc.graph.validity`), on the arrays not already checked by another graph."""
         if not self.num_edges:
             raise GraphError(f"no edges: {NO_EDGES}")
-        if "vertex_ids" in new and np.any(np.diff(self.vertex_ids) <= 0):
+        # Compared, not subtracted: np.diff of int64 ids wraps around at the limits (int64 min to 1 is negative).
+        if "vertex_ids" in new and np.any(self.vertex_ids[1:] <= self.vertex_ids[:-1]):
             raise GraphError("vertex_ids must be sorted ascending and unique")
         if self.edges.min() < 0 or self.edges.max() >= self.num_poses:
             raise GraphError("edges refer to vertex rows outside [0, N)")
@@ -212,7 +224,10 @@ class PoseGraph:
         """`(E,)` bool: edges joining consecutive ids in either direction (`id_j == id_i +/- 1`),
         the known inliers by default."""
         ids = self.vertex_ids[self.edges]
-        return (ids[:, 1] == ids[:, 0] + 1) | (ids[:, 0] == ids[:, 1] + 1)
+        low, high = ids.min(axis=1), ids.max(axis=1)
+        # `high - 1` cannot wrap unless high is int64's minimum, and then it is not `low`; `low + 1`
+        # would wrap at int64's maximum and call an edge from the largest id to the smallest odometry.
+        return high - 1 == low
 
     @property
     def is_loop_closure(self) -> np.ndarray:

@@ -121,9 +121,10 @@ class OnlineSolver:
         EgncError: an option of the `egnc` schedule (`strong_at_arrival`, `decide_at_arrival`)
             asked of the `risam` one.
 
-    The `add_*` calls check what they are given (integer ids, finite numbers of the right
-    shape, symmetric positive-definite information, quaternions that normalize, known poses)
-    and raise `GraphError` before taking anything in.
+    The `add_*` calls check what they are given (integer ids within int64, finite numbers of
+    the right shape, symmetric positive-definite information, quaternions that normalize, known
+    poses) and raise `GraphError` before taking anything in; `NumericalError` for a new edge a
+    double cannot represent at the current estimate (`egnc.online.intake`). Empty batches add nothing.
     """
 
     def __init__(
@@ -161,7 +162,7 @@ class OnlineSolver:
 
     def add_prior(self, vertex_id: int, pose: ArrayLike) -> None:
         """Hold pose `vertex_id` at `pose` `(P,)`: the gauge of the map (module docstring); one per solver."""
-        self._intake.add_prior(vertex_id, pose, self._map.has_prior)
+        self._intake.add_prior(vertex_id, pose, self._map.has_prior, self._map)
 
     def add_odometry(self, i: int, j: int, measurement: ArrayLike, information: ArrayLike) -> int:
         """Add a known-inlier edge measuring `X_i^-1 X_j`; returns its edge index.
@@ -180,11 +181,11 @@ class OnlineSolver:
 
     def add_odometry_batch(self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike) -> np.ndarray:
         """Batch `add_odometry`: `ids` `(K, 2)`, `measurements` `(K, P)`, `information` `(K, d, d)`."""
-        return self._intake.add_edges(ids, measurements, information, False, len(self._map.edges))
+        return self._intake.add_edges(ids, measurements, information, False, self._map)
 
     def add_loops(self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike) -> np.ndarray:
         """Batch `add_loop`: `ids` `(K, 2)`, `measurements` `(K, P)`, `information` `(K, d, d)`."""
-        return self._intake.add_edges(ids, measurements, information, True, len(self._map.edges))
+        return self._intake.add_edges(ids, measurements, information, True, self._map)
 
     # ------------------------------------------------------------------ updating
 
