@@ -23,7 +23,9 @@ Checkpoints: with `checkpoint`, the solver's whole state is written there (atomi
 `checkpoint_every` steps and after the last one, together with a fingerprint of the graph. A
 replay given an existing checkpoint of the same graph and settings resumes after its last step
 (the solver's update count: one update per step); since every update is deterministic, the final
-result equals an uninterrupted run's.
+result equals an uninterrupted run's. The checkpoint's own graph must be the replay's after those
+steps (`_check_prefix`), and its content its digest (`egnc.io.checkpoint`): an edited checkpoint
+is refused, not resumed to another map.
 """
 
 from __future__ import annotations
@@ -245,9 +247,10 @@ def replay(
         on_step: called after every update with `(step, total_steps, report)`.
 
     Raises:
-        EgncError: the checkpoint belongs to another graph or other settings or cannot be read
-            (`OnlineSolver.load`), or, where it does not exist yet, cannot be written there
-            (checked before the first step).
+        EgncError: the checkpoint belongs to another graph or other settings, cannot be read
+            (`OnlineSolver.load`: damaged, or edited since it was written), holds a graph that is
+            not this one's after its steps, or, where it does not exist yet, cannot be written
+            there (checked before the first step).
         GraphError: edges no edge connects to the gauge pose (`replay_plan`).
     """
     check_instance("graph", graph, PoseGraph)
@@ -256,7 +259,7 @@ def replay(
     steps = replay_plan(graph, known)
     settings = _checkpoint_meta(graph, known, method, online_options or OnlineOptions())
     path = None if checkpoint is None else Path(checkpoint)
-    solver = _resumed(path, settings)
+    solver = _resumed(path, settings, graph, known, steps)
     if solver is None:
         solver = OnlineSolver(
             graph.dim,
@@ -324,9 +327,12 @@ def _checkpoint_meta(graph: PoseGraph, known: np.ndarray, method: str, online_op
     }
 
 
-def _resumed(path: Path | None, settings: dict) -> OnlineSolver | None:
+def _resumed(
+    path: Path | None, settings: dict, graph: PoseGraph, known: np.ndarray, steps: list[ReplayStep]
+) -> OnlineSolver | None:
     """The solver of the checkpoint at `path` when it exists, refused unless it was written with
-    `settings` (`replay`'s checkpoint meta); None otherwise, once `path` (if any) is known writable."""
+    `settings` (`replay`'s checkpoint meta) and holds the first steps of the replay of `graph`
+    (`_check_prefix`); None otherwise, once `path` (if any) is known writable."""
     if path is None:
         return None
     if not path.exists():
@@ -341,7 +347,37 @@ def _resumed(path: Path | None, settings: dict) -> OnlineSolver | None:
         same_graph = saved["fingerprint"] == settings["fingerprint"]
         what = ", ".join(differs) if same_graph else "another graph or edge roles"
         raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
+    _check_prefix(path, solver, graph, known, steps)
     return solver
+
+
+def _check_prefix(
+    path: Path, solver: OnlineSolver, graph: PoseGraph, known: np.ndarray, steps: list[ReplayStep]
+) -> None:
+    """Refuse a checkpoint's `solver` whose graph is not that of the replay's first `solver.steps`
+    `steps` of `graph` (`known`: `(E,)` roles): its poses, edges, roles, measurements and
+    information. Its fingerprint names the input; this catches a checkpoint edited since."""
+    done = solver.steps
+    inserted = np.concatenate([step.edges for step in steps[:done]] or [np.zeros(0, dtype=np.int64)])
+    refuse = f"{path}: the checkpoint's graph is not this input's after {done} steps"
+    if done > len(steps) or len(inserted) != solver.num_edges:
+        raise EgncError(f"{refuse} ({solver.num_edges} edges, expected {len(inserted)}); remove it")
+    ids = graph.vertex_ids[graph.edges[inserted]]
+    gauge = graph.vertex_ids[gauge_row(graph)]
+    if not np.array_equal(np.sort(solver.vertex_ids), np.union1d(ids.ravel(), [gauge])):
+        raise EgncError(f"{refuse} (other poses); remove it")
+    differs = (
+        np.any(solver.edge_ids != ids, axis=1)
+        | (solver.is_loop_closure == known[inserted])
+        | np.any(solver.measurements != graph.measurements[inserted], axis=1)
+        | np.any(solver.information != graph.information[inserted], axis=(1, 2))
+    )
+    if differs.any():
+        first = int(inserted[np.argmax(differs)])
+        line = int(graph.edge_lines[first])
+        where = f" (line {line})" if line else ""
+        i, j = graph.vertex_ids[graph.edges[first]].tolist()
+        raise EgncError(f"{refuse}: its edge ({i}, {j}){where} differs (edited?); remove it")
 
 
 def _in_file_order(result: Result, inserted: np.ndarray, graph: PoseGraph) -> Result:

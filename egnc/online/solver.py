@@ -334,6 +334,16 @@ class OnlineSolver:
         return self._map.vertex_ids[self._map.edges]
 
     @property
+    def measurements(self) -> np.ndarray:
+        """`(E, P)` measurement of every edge, in insertion order."""
+        return self._map.measurements.copy()
+
+    @property
+    def information(self) -> np.ndarray:
+        """`(E, d, d)` information matrix of every edge, in insertion order."""
+        return self._map.information.copy()
+
+    @property
     def is_loop_closure(self) -> np.ndarray:
         """`(E,)` bool: edges added as loop closures."""
         return self._map.robust.copy()
@@ -417,8 +427,9 @@ class OnlineSolver:
 
         Raises:
             OptionError: `path` is not a file path.
-            EgncError: the file cannot be read, is not an egnc checkpoint of this version, or its
-                entries do not fit together (`egnc.io.checkpoint.read_checkpoint`).
+            EgncError: the file cannot be read, is not an egnc checkpoint of this version, its
+                entries do not fit together, or its content is not that of its digest (edited
+                after it was written; `egnc.io.checkpoint.read_checkpoint`).
         """
         saved, arrays = read_state(path)
         try:
