@@ -151,7 +151,9 @@ class OnlineSolver:
         """Add a pose; `pose` `(P,)` (`x y theta` or `x y z qx qy qz qw`) is its initial guess.
 
         Without `pose`, the pose must be reached by an odometry edge added before the next update,
-        which places it by composing the measurement from the other end's current estimate.
+        which places it by composing the measurement from the other end's current estimate; where
+        no odometry of the update reaches it from a placed pose, the first loop closure that does
+        places it the same way (the loop is graduated as any other).
         """
         self.add_poses([vertex_id], None if pose is None else one_row(pose))
 
