@@ -13,6 +13,7 @@ import pytest
 
 import egnc
 from egnc.errors import EgncError
+from egnc.io.checkpoint import content_digest
 from egnc.online import OnlineSolver
 from egnc.online.replay import replay
 
@@ -34,6 +35,9 @@ def _entries(blob: bytes) -> tuple[dict, dict[str, np.ndarray]]:
 
 
 def _write(path: Path, settings: object, arrays: dict[str, np.ndarray]) -> Path:
+    """A checkpoint of `settings` and `arrays` with their digest made again: its checks beyond the digest."""
+    if isinstance(settings, dict) and "digest" in settings:
+        settings["digest"] = content_digest(settings, arrays)
     np.savez(path, settings=np.array(json.dumps(settings)), **arrays)  # type: ignore[arg-type]
     return path
 
@@ -117,7 +121,7 @@ def test_arrays_that_do_not_fit_together_are_refused(checkpoint, tmp_path, chang
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        (lambda settings: settings.update(version=0), "checkpoint version 0, expected 1"),
+        (lambda settings: settings.update(version=0), "checkpoint version 0, expected 2"),
         (lambda settings: settings.pop("gauge"), r"incomplete checkpoint \(settings without gauge\)"),
         (lambda settings: settings.update(dim=4), "dim is 4, expected 2 or 3"),
         (lambda settings: settings.update(steps=settings["steps"] + 1), r"steps is \d+, expected \d+"),
@@ -168,3 +172,67 @@ def test_a_checkpoint_that_cannot_be_written_fails_before_the_first_step(tmp_pat
     with pytest.raises(EgncError, match=r"missing/state.npz: cannot write file: directory .*missing does not exist"):
         replay(graph, "egnc", checkpoint=tmp_path / "missing" / "state.npz", on_step=lambda *step: steps.append(step))
     assert steps == []
+
+
+def _edited(path: Path, name: str, version: int = 2) -> None:
+    """Load the checkpoint `path` with NumPy, change its array `name` (the first loop closure's
+    measurement, or its `robust` flag), and save it again; as version 1 (no digest) on request."""
+    with np.load(path) as data:
+        arrays = {key: data[key].copy() for key in data.files}
+    settings = json.loads(str(arrays["settings"]))
+    loop = int(np.flatnonzero(arrays["robust"])[0])
+    if name == "robust":
+        arrays["robust"][loop] = False
+    else:
+        arrays["measurements"][loop, 0] += 0.5
+    if version == 1:
+        settings.pop("digest", None)
+        settings["version"] = 1
+    arrays["settings"] = np.array(json.dumps(settings))
+    np.savez(path, **arrays)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["measurements", "robust"])
+def test_a_checkpoint_edited_and_saved_again_is_refused(tmp_path, name):
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(60)
+    path = tmp_path / "state.npz"
+    replay(graph, "egnc", checkpoint=path, stop_after=40)
+    _edited(path, name)
+    with pytest.raises(EgncError, match=r"state.npz: the checkpoint's content does not match its digest") as error:
+        replay(graph, "egnc", checkpoint=path)
+    assert str(error.value).startswith(str(path)) and "remove it" in str(error.value)
+    # Written before the digest (version 1): refused where its graph is not the input's.
+    replay(graph, "egnc", checkpoint=(again := tmp_path / "v1.npz"), stop_after=40)
+    _edited(again, name, version=1)
+    with pytest.raises(EgncError, match=r"v1.npz: the checkpoint's graph is not this input's after 40 steps: its edge"):
+        replay(graph, "egnc", checkpoint=again)
+
+
+def test_a_checkpoint_written_before_the_digest_resumes_where_its_graph_is_the_inputs(tmp_path):
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(60)
+    path = tmp_path / "state.npz"
+    replay(graph, "egnc", checkpoint=path, stop_after=40)
+    settings, arrays = _entries(path.read_bytes())
+    del settings["digest"]
+    settings["version"] = 1
+    _write(path, settings, arrays)
+    resumed = replay(graph, "egnc", checkpoint=path)
+    whole = replay(graph, "egnc")
+    assert resumed.resumed_from == 40
+    np.testing.assert_array_equal(resumed.result.graph.poses, whole.result.graph.poses)
+    np.testing.assert_array_equal(resumed.result.inliers, whole.result.inliers)
+
+
+def test_the_cli_refuses_an_edited_checkpoint_naming_it(tmp_path):
+    graph = tmp_path / "small.g2o"
+    egnc.write_g2o(egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(60), graph)
+    state, out = tmp_path / "state.npz", tmp_path / "out.g2o"
+    replay(egnc.read_g2o(graph), "egnc", checkpoint=state, stop_after=40)
+    _edited(state, "robust")
+    run = subprocess.run(
+        [sys.executable, "-m", "egnc", str(graph), "--online", "--checkpoint", str(state), "-o", str(out), "-q"],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 1 and not out.exists()
+    assert run.stderr.strip().startswith(f"egnc-solve: error: {state}: the checkpoint's content does not match")

@@ -178,3 +178,28 @@ def test_a_killed_replay_resumes_to_the_uninterrupted_result(tmp_path, extra):
     np.testing.assert_allclose(egnc.read_g2o(out).poses, egnc.read_g2o(whole_out).poses, atol=1e-9, rtol=0)
     assert json.loads(report.read_text())["rejected_edges"] == json.loads(whole_report.read_text())["rejected_edges"]
     assert online["iterations"] == json.loads(whole_report.read_text())["online"]["iterations"]
+
+
+LOOP_FIRST_G2O = (
+    "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n"
+    "EDGE_SE2 0 2 2 0 0 1 0 0 1 0 1\nEDGE_SE2 2 1 -1 0 0 1 0 0 1 0 1\n"
+)
+_COVARIANCE = "1 0 0 0 1 0 0 0 1"
+PRIOR_LATER_IRL = (
+    f"t\n2024-01-01\n2\nnonlinear\n\nPRIOR 1 0 2 0 0 0 {_COVARIANCE}\n"
+    f"ODOMETRY 1 0 0 1 1 0 0 {_COVARIANCE}\nODOMETRY 1 0 1 2 1 0 0 {_COVARIANCE}\n"
+)
+
+
+@pytest.mark.parametrize(("name", "text"), [("loop_first.g2o", LOOP_FIRST_G2O), ("prior_later.irl", PRIOR_LATER_IRL)])
+def test_online_replays_what_the_batch_solver_accepts(tmp_path, name, text):
+    # A pose first reached by a loop closure, a prior on a later pose: found by the files fuzzer.
+    path = tmp_path / name
+    path.write_text(text)
+    outputs = {}
+    for mode in ([], ["--online"]):
+        out = tmp_path / f"out{len(mode)}.g2o"
+        run = egnc_solve(path, *mode, "-o", out, "-q")
+        assert run.returncode == 0, run.stderr
+        outputs[len(mode)] = egnc.read_g2o(out).poses
+    np.testing.assert_allclose(outputs[1], outputs[0], atol=1e-9)

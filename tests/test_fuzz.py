@@ -4,7 +4,7 @@ Files: reading a mutant gives a `PoseGraph` or an `EgncError` (always the error 
 operators); solving an accepted one gives a result or an `EgncError`, a strict-JSON report, and
 nothing on stdout. Options: an invalid field value is refused at construction naming the field,
 valid ones solve. API: every misuse ends in a one-line `EgncError`. Checkpoints: a damaged one is
-refused in one line naming the file, or resumes. Nothing hangs.
+refused in one line naming the file, or resumes; an edited one does not resume. Nothing hangs.
 `python benchmarks/fuzz.py --target all` runs more cases and prints the tables in RELIABILITY.md.
 """
 
@@ -65,6 +65,14 @@ def test_invalid_mutants_are_refused_valid_ones_read_and_fix_all_has_nothing_to_
     assert fixed and all(solve == "nothing to optimize" for outcome in fixed for solve in outcome.solves)
 
 
+def test_mutants_whose_poses_a_replay_meets_out_of_order_replay_online(outcomes):
+    # A pose first reached by a loop closure, a prior on a later pose (issue 56): what the batch
+    # solver accepts, `egnc-solve --online` replays.
+    online = [outcome for outcome in outcomes if outcome.operator in fuzz_files.ONLINE_OPERATORS]
+    assert online and all(outcome.read == "graph" for outcome in online)
+    assert all(outcome.solves[-1] == "online finite" for outcome in online)
+
+
 def test_time_limit_turns_a_hang_into_a_class():
     with pytest.raises(fuzz_core.Hang), fuzz_core.time_limit(0.05):
         while True:
@@ -112,4 +120,5 @@ def test_checkpoint_fuzz_refuses_damage_in_one_line_naming_the_file_or_resumes(t
     results = fuzz_checkpoints.fuzz_checkpoints(200, SEED, tmp_path)
     assert {case.operator for case in results} == set(fuzz_checkpoints.OPERATORS)
     assert {case.dim for case in results} == {2, 3}
-    assert {case.outcome for case in results} == {"clean error", "resumed"}
+    # An edited checkpoint saved again (issue 56) is refused when the replay resumes from it.
+    assert {case.outcome for case in results} == {"clean error", "resumed", "refused edit"}

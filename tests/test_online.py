@@ -19,7 +19,7 @@ from egnc.metrics import precision_recall
 from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
 from egnc.nonlinear.least_squares import Problem, SolverOptions, solve_least_squares
 from egnc.online import OnlineOptions, OnlineSolver
-from egnc.online.replay import replay, replay_steps
+from egnc.online.replay import replay, replay_plan, replay_steps
 from egnc.robust.decision import Decision, truncated_cost
 from egnc.robust.kernels import make_kernel
 from egnc.robust.losses import KernelLoss
@@ -833,3 +833,74 @@ def test_a_prior_that_moves_the_map_out_of_double_precision_is_refused():
     solver.add_prior(0, [5.0, 0.0, 0.0])
     solver.update()
     np.testing.assert_allclose(solver.poses[:, 0], [5.0, 6.0])
+
+
+def _graph_from(edges: list[tuple[int, int]], num_poses: int, fixed: int | None = None) -> egnc.PoseGraph:
+    """A 2D graph on poses `0..num_poses-1` along the x axis, with unit steps measured exactly."""
+    ids = np.array(edges)
+    measurements = np.zeros((len(edges), 3))
+    measurements[:, 0] = ids[:, 1] - ids[:, 0]
+    is_fixed = np.zeros(num_poses, dtype=bool)
+    if fixed is not None:
+        is_fixed[fixed] = True
+    return egnc.PoseGraph(
+        dim=2,
+        vertex_ids=np.arange(num_poses),
+        poses=np.column_stack((np.arange(num_poses, dtype=float), np.zeros((num_poses, 2)))),
+        edges=ids,
+        measurements=measurements,
+        information=np.tile(np.eye(3), (len(edges), 1, 1)),
+        fixed=is_fixed,
+        edge_lines=np.arange(len(edges)) + 4,
+    )
+
+
+@pytest.mark.parametrize(
+    ("edges", "fixed"),
+    [
+        ([(0, 2), (2, 1)], None),  # pose 2 first reached by a loop closure, pose 1 then by odometry from it
+        ([(0, 1), (1, 2)], 2),  # the gauge (a prior) on the last pose
+        ([(0, 1), (2, 3), (1, 4), (3, 4)], None),  # edge (2, 3) waits until loop (1, 4) places pose 4
+        ([(1, 0), (0, 3), (3, 2), (2, 1)], 3),  # odometry in an order that reaches pose 1 last
+    ],
+)
+def test_a_replay_places_poses_from_whatever_edge_reaches_a_known_one(edges, fixed):
+    graph = _graph_from(edges, 1 + max(max(edge) for edge in edges), fixed)
+    outcome = replay(graph, "egnc")
+    batch = egnc.solve(graph, "egnc")
+    np.testing.assert_array_equal(outcome.result.inliers, batch.inliers)
+    np.testing.assert_allclose(outcome.result.graph.poses, batch.graph.poses, atol=1e-9)
+    # Loop closures stay loop closures, whichever edge placed a pose.
+    assert outcome.solver.is_loop_closure.sum() == (~graph.is_odometry).sum()
+    assert outcome.steps == len(replay_steps(graph, graph.is_odometry))
+
+
+def test_a_replay_of_edges_that_reach_their_poses_in_order_keeps_one_step_per_later_pose():
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o")
+    known = graph.is_odometry
+    later = graph.edges.max(axis=1)
+    order = np.lexsort((np.arange(graph.num_edges), ~known, later))
+    expected = np.split(order, np.flatnonzero(np.diff(later[order])) + 1)
+    plan = replay_plan(graph, known)
+    assert len(plan) == len(expected)
+    for step, edges in zip(plan, expected):
+        np.testing.assert_array_equal(step.edges, edges)
+        assert not len(step.loop_placed)
+
+
+def test_a_replay_refuses_edges_no_path_joins_to_the_gauge_naming_their_line():
+    graph = _graph_from([(0, 1), (2, 3)], 4)
+    with pytest.raises(GraphError, match=r"line 5: edge \(2, 3\) has no path of edges to the gauge pose 0"):
+        replay(graph, "egnc")
+
+
+def test_a_pose_added_without_a_value_is_placed_along_a_loop_when_no_odometry_reaches_it():
+    solver, information = _chain("egnc")
+    solver.add_pose(100)
+    solver.add_loop(3, 100, [0.5, 0.0, 0.0], information)
+    solver.add_odometry(100, 101, [1.0, 0.0, 0.0], information)
+    solver.update()
+    poses = dict(zip(solver.vertex_ids.tolist(), solver.poses))
+    np.testing.assert_allclose(poses[100], poses[3] + [0.5, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(poses[101], poses[3] + [1.5, 0.0, 0.0], atol=1e-12)
+    assert solver.is_loop_closure.sum() == 1

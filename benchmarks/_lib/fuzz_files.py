@@ -4,7 +4,8 @@ Each mutant is a small g2o or IRL text changed by one random operator (byte flip
 truncation, deleted, repeated or swapped lines, swapped fields, huge, tiny and non-numeric numbers,
 Unicode separators, CRLF, foreign tags; since issue 19 also integers of 5000 digits, a byte-order
 mark, TORO records, a 2 MiB line, FIX on every vertex and a deleted IRL header line; since issue 56
-the ids moved, in order, to int64's limits). For each one:
+the ids moved, in order, to int64's limits, a pose first reached by a loop closure and a prior on a
+later pose, `ONLINE_OPERATORS`). For each one:
 
 - reading must give a `PoseGraph` or an `EgncError`, within `TIME_LIMIT_S` (else a hang); the
   mutants that are invalid by construction (`INVALID_OPERATORS`) must give the error, those
@@ -12,6 +13,9 @@ the ids moved, in order, to int64's limits). For each one:
 - an accepted graph is solved with `l2` and `egnc` (a few iterations per stage): the result must be
   finite or an `EgncError`; its JSON report must be strict JSON; a graph with every vertex fixed
   must come back with the "nothing to optimize" status, not "converged";
+- the mutants of `ONLINE_OPERATORS` are also replayed online, as `egnc-solve --online` does
+  (`egnc.online.replay`): where the batch `egnc` solve is finite, the replay must be too, not an
+  `EgncError` ("online refused");
 - nothing may be printed on stdout (file descriptor 1, so BLAS messages count too).
 
 Run from `benchmarks/fuzz.py --target files`; `tests/test_fuzz.py` runs fewer cases.
@@ -37,6 +41,7 @@ from egnc.cli.report import report_dict
 from egnc.errors import EgncError
 from egnc.io import IrlLog, read_g2o, read_irl, write_g2o, write_irl
 from egnc.nonlinear.least_squares import NOTHING_TO_OPTIMIZE
+from egnc.online.replay import replay
 
 from .fuzz_core import TIME_LIMIT_S, Hang, counts_table, time_limit
 from .paths import SHIPPED_DATASETS
@@ -46,7 +51,7 @@ SOLVER_OPTIONS = egnc.SolverOptions(max_iterations=5)
 GNC_OPTIONS = egnc.GncOptions(max_stages=8)
 """Few iterations and stages: the fuzzer looks for crashes and non-finite numbers, not optima."""
 BAD_OUTCOMES = ("crash", "hang", "accepted invalid", "refused valid", "non-finite result",
-                "converged with nothing to solve", "stdout output", "invalid JSON")  # fmt: skip
+                "converged with nothing to solve", "stdout output", "invalid JSON", "online refused")  # fmt: skip
 """Outcome classes that are bugs."""
 
 SPECIAL_NUMBERS = (
@@ -57,18 +62,14 @@ SEPARATORS = ("\x1c", "\u2028", "\xa0", "\r", "\x0b", "\t", "\x00")
 OPERATORS = (
     "byte", "truncate", "delete line", "repeat line", "swap lines", "number", "swap fields", "separator", "crlf",
     "foreign line", "scale", "huge integer", "bom", "toro", "long line", "fix all", "drop header line",
-    "int64 ids",
+    "int64 ids", "loop first", "prior later",
 )  # fmt: skip
 INVALID_OPERATORS = ("huge integer", "long line", "drop header line")
 """Operators whose every mutant is invalid: reading it must fail with an `EgncError`. An integer field
 of 5000 digits is out of range wherever it stands; a 2 MiB line is over the readers' bound; an IRL
 header without one of its five lines shifts the others (without its notes line the PRIOR used to be
 read as the notes)."""
-VALID_OPERATORS = ("int64 ids",)
-"""Operators whose every mutant is valid: reading it must give a graph. Ids moved in order to the
-ends of int64 (issue 56: `[int64 min, 1]` was refused as unsorted, `np.diff` wrapping around)."""
-INT64_MIN, INT64_MAX = int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max)
-G2O_ONLY = ("toro", "fix all", "int64 ids")
+    "int64 ids", "loop first", "prior later",
 IRL_ONLY = ("drop header line",)
 TORO_ORDER = (0, 1, 3, 5, 2, 4)
 """g2o's upper triangle `I11 I12 I13 I22 I23 I33` to TORO's `I11 I12 I22 I33 I13 I23`."""
@@ -116,6 +117,8 @@ def mutate(text: str, rng: random.Random, irl: bool = False) -> tuple[str, str]:
         return operator, _mutate_issue19(operator, lines, rng)
     if operator == "int64 ids":
         return operator, _ids_at_int64_limits(lines, rng)
+    if operator in ONLINE_OPERATORS:
+        return operator, _mutate_online(operator, lines, rng, irl)
     if operator == "byte":  # any byte, so invalid UTF-8 too (kept as a surrogate escape until written)
         data = bytearray(text.encode("utf-8", "surrogateescape"))
         data[rng.randrange(len(data))] = rng.randrange(256)
@@ -209,6 +212,33 @@ def _id_fields(line: str) -> tuple[list[int], list[str]]:
     return positions, [fields[k] for k in positions]
 
 
+def _mutate_online(operator: str, lines: list[str], rng: random.Random, irl: bool) -> str:
+    """The operators of issue 56 (`ONLINE_OPERATORS`): valid graphs whose poses a replay meets out of order."""
+    ids = sorted({int(line.split(" ")[1]) for line in lines if line.startswith("VERTEX")})
+    if irl:
+        ids = sorted({int(token) for line in lines if line.startswith("ODOMETRY") for token in line.split(" ")[3:5]})
+    k = rng.choice(ids[1:-2]) if len(ids) > 3 else ids[-1]
+    if operator == "prior later" and irl:
+        return "\n".join(_with_fields(line, {3: str(k)}) if line.startswith("PRIOR") else line for line in lines)
+    if operator == "prior later":
+        return "\n".join([*lines, f"FIX {k}"])
+    swap = {str(k): str(k + 2), str(k + 2): str(k)}  # pose k + 2 then sits where k was
+    positions = {"ODOMETRY": (3, 4), "LOOP": (3, 4)} if irl else {"VERTEX": (1,), "EDGE": (1, 2)}
+    for n, line in enumerate(lines):
+        places = next((spots for tag, spots in positions.items() if line.startswith(tag)), ())
+        fields = line.split(" ")
+        lines[n] = _with_fields(line, {p: swap[fields[p]] for p in places if fields[p] in swap})
+    return "\n".join(lines)
+
+
+def _with_fields(line: str, values: dict[int, str]) -> str:
+    """`line` with its space-separated fields at the positions of `values` replaced."""
+    fields = line.split(" ")
+    for position, value in values.items():
+        fields[position] = value
+    return " ".join(fields)
+
+
 def _toro(line: str) -> str:
     """A `VERTEX_SE2` or `EDGE_SE2` line in TORO's form (other lines unchanged)."""
     fields = line.split(" ")
@@ -263,9 +293,13 @@ def run_case(text: str, operator: str, folder: Path, irl: bool = False) -> Outco
     with stdout_captured() as output:
         try:
             with time_limit(TIME_LIMIT_S):
-                graph = read_irl(path).graph if irl else read_g2o(path, skip_unknown=True)
+                log = read_irl(path) if irl else None
+                graph = log.graph if log is not None else read_g2o(path, skip_unknown=True)
                 read = "accepted invalid" if operator in INVALID_OPERATORS else "graph"
                 solves = [_solve(graph, method) for method in METHODS]
+                if operator in ONLINE_OPERATORS:
+                    known = log.is_odometry if log is not None else graph.is_odometry
+                    solves.append(_replay(graph, known, batch_finite=solves[-1] == "finite"))
         except Hang:
             read, solves = ("hang", []) if not solves else (read, [*solves, "hang"])
         except EgncError:
@@ -293,6 +327,17 @@ def _solve(graph: egnc.PoseGraph, method: str) -> str:
     return "finite"
 
 
+def _replay(graph: egnc.PoseGraph, known: np.ndarray, batch_finite: bool) -> str:
+    """Replay `graph` online (`known`: `(E,)` odometry) as `egnc-solve --online` does; classify it."""
+    try:
+        outcome = replay(graph, "egnc", known_inliers=known, linear_solver="scipy", options=SOLVER_OPTIONS)
+    except EgncError:
+        return "online refused" if batch_finite else "online error"
+    except Exception:  # noqa: BLE001
+        return "crash"
+    return "online finite" if np.isfinite(outcome.result.graph.poses).all() else "non-finite result"
+
+
 def fuzz(cases: int, seed: int) -> list[Outcome]:
     """Run `cases` mutants, cycling over the source texts, from one seed."""
     rng = random.Random(seed)
@@ -317,7 +362,8 @@ def bad(outcome: Outcome) -> list[str]:
 READ_CLASSES = ("graph", "clean error", "accepted invalid", "refused valid", "crash", "hang")
 SOLVE_CLASSES = (
     "finite", "nothing to optimize", "solver error", "solver failure reported", "non-finite result",
-    "converged with nothing to solve", "invalid JSON", "crash", "hang",
+    "converged with nothing to solve", "invalid JSON", "online finite", "online error", "online refused", "crash",
+    "hang",
 )  # fmt: skip
 
 

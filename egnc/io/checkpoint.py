@@ -4,10 +4,17 @@
 reads one back and checks it before anything is built from it: an empty, foreign or damaged
 file, a missing entry, or arrays whose shapes, types, values or edge indices do not fit
 together give one `EgncError` naming the file, not a traceback from NumPy or from a later update.
+
+Since version 2 the settings hold a SHA-256 `digest` of everything else in the file
+(`content_digest`): a checkpoint loaded, edited (a measurement, a `robust` flag, an option) and
+saved again no longer matches it and is refused, instead of resuming to another map. A version 1
+checkpoint (written before the digest) is read without it; `egnc.online.replay` resumes one only
+where its graph is the input's.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -18,14 +25,17 @@ from egnc.graph import POSE_SIZE, TANGENT_SIZE
 from egnc.graph.index_sets import sorted_unique
 from egnc.io.atomic import atomic_binary_file
 
-CHECKPOINT_VERSION = 1
-"""Format version written into every checkpoint; `read_checkpoint` refuses others."""
+CHECKPOINT_VERSION = 2
+"""Format version written into every checkpoint; `read_checkpoint` reads it and version 1."""
+
+UNDIGESTED_VERSION = 1
+"""The version written before checkpoints held a `digest`; still read (module docstring)."""
 
 SETTINGS = (
     "version", "dim", "method", "linear_solver", "options", "gnc_options", "online_options",
-    "gauge", "has_prior", "steps", "last_status", "converged_poses", "meta",
+    "gauge", "has_prior", "steps", "last_status", "converged_poses", "meta", "digest",
 )  # fmt: skip
-"""The keys of a checkpoint's settings."""
+"""The keys of a checkpoint's settings (a version 1 checkpoint has all but `digest`)."""
 
 RIGID_TOLERANCE = 1e-6
 """Largest entry of `R^T R - I` a checkpoint's pose or measurement rotation `R` may have (they are
@@ -36,14 +46,15 @@ _ZIP_SIGNATURE = b"PK"
 
 
 def write_checkpoint(path: Path, settings: dict, arrays: dict[str, np.ndarray]) -> None:
-    """Write `settings` (JSON data, with every key of `SETTINGS`) and `arrays` to `path`, atomically.
+    """Write `settings` (JSON data, with every key of `SETTINGS` but `digest`), their `content_digest`
+    and `arrays` to `path`, atomically.
 
     Raises:
         TypeError, ValueError: `settings` is not JSON data (nothing is written).
         EgncError: the file cannot be written.
     """
-    assert set(settings) == set(SETTINGS), "a checkpoint's settings are SETTINGS"
-    text = json.dumps(settings)
+    assert set(settings) == set(SETTINGS) - {"digest"}, "a checkpoint's settings are SETTINGS but its digest"
+    text = json.dumps({**settings, "digest": content_digest(settings, arrays)})
     with atomic_binary_file(path) as out:
         np.savez(out, settings=np.array(text), **arrays)  # type: ignore[arg-type]
 
@@ -77,15 +88,33 @@ def read_checkpoint(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
     arrays = entries
     if not isinstance(settings, dict):
         raise EgncError(f"{path}: not an egnc checkpoint (its settings are not a JSON object)")
-    if settings.get("version") != CHECKPOINT_VERSION:
-        raise EgncError(f"{path}: checkpoint version {settings.get('version')}, expected {CHECKPOINT_VERSION}")
-    missing = [key for key in SETTINGS if key not in settings]
+    version = settings.get("version")
+    if not _is_int(version) or version not in (UNDIGESTED_VERSION, CHECKPOINT_VERSION):
+        raise EgncError(f"{path}: checkpoint version {version}, expected {CHECKPOINT_VERSION}")
+    missing = [key for key in SETTINGS if key not in settings and (key != "digest" or version != UNDIGESTED_VERSION)]
     if missing:
         raise EgncError(f"{path}: incomplete checkpoint (settings without {', '.join(missing)})")
     problem = _inconsistency(settings, arrays)
     if problem:
         raise EgncError(f"{path}: inconsistent checkpoint ({problem})")
+    if version != UNDIGESTED_VERSION and settings["digest"] != content_digest(settings, arrays):
+        raise EgncError(
+            f"{path}: the checkpoint's content does not match its digest: it was changed after egnc wrote it;"
+            " remove it and replay from the start"
+        )
     return settings, arrays
+
+
+def content_digest(settings: dict, arrays: dict[str, np.ndarray]) -> str:
+    """The SHA-256 (hex) of a checkpoint's `settings` but their `digest` (as sorted JSON) and its
+    `arrays` (each name, type, shape and bytes, by name)."""
+    digest = hashlib.sha256()
+    digest.update(json.dumps({k: v for k, v in settings.items() if k != "digest"}, sort_keys=True).encode())
+    for name in sorted(arrays):
+        array = np.ascontiguousarray(arrays[name])
+        digest.update(f"\n{name} {array.dtype.str} {array.shape}\n".encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
 
 
 def _inconsistency(settings: dict, arrays: dict[str, np.ndarray]) -> str:

@@ -7,6 +7,15 @@ inliers (odometry) come first, then the loop closures, each in file order. One s
 its own time order; for a g2o file it is the order in which a robot numbering its poses would
 have made the measurements.
 
+The replay starts from the gauge pose (the prior's or the fixed one, else row 0). A step whose
+edges do not reach its poses in this order from the poses known so far is taken in as far as
+its edges allow: odometry reaching a known pose in any order, a pose reached first by a loop
+closure placed along that loop (which is graduated as a loop all the same), and the edges of
+which neither end is known yet wait for the step that reaches one of them (a prior on a later
+pose: the edges before it wait until the replay has met their poses). A graph whose edges all
+reach their poses in order replays exactly as described above; steps left with nothing to add
+are no updates.
+
 The `Result` of a replay lists the edges in the graph's own (file) order, so its edge indices,
 `rejected_edges` included, are those of `egnc.solve` on the same graph.
 
@@ -14,7 +23,9 @@ Checkpoints: with `checkpoint`, the solver's whole state is written there (atomi
 `checkpoint_every` steps and after the last one, together with a fingerprint of the graph. A
 replay given an existing checkpoint of the same graph and settings resumes after its last step
 (the solver's update count: one update per step); since every update is deterministic, the final
-result equals an uninterrupted run's.
+result equals an uninterrupted run's. The checkpoint's own graph must be the replay's after those
+steps (`_check_prefix`), and its content its digest (`egnc.io.checkpoint`): an edited checkpoint
+is refused, not resumed to another map.
 """
 
 from __future__ import annotations
@@ -36,7 +47,17 @@ from egnc.nonlinear.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
 from egnc.robust.gnc import GncOptions, known_inlier_mask
 
-__all__ = ["CHECKPOINT_EVERY", "ReplayOutcome", "add_gauge", "add_step", "latency_summary", "replay", "replay_steps"]
+__all__ = [
+    "CHECKPOINT_EVERY",
+    "ReplayOutcome",
+    "ReplayStep",
+    "add_gauge",
+    "add_step",
+    "latency_summary",
+    "replay",
+    "replay_plan",
+    "replay_steps",
+]
 
 CHECKPOINT_EVERY = 50
 """Steps between two checkpoint writes unless told otherwise."""
@@ -68,23 +89,121 @@ class ReplayOutcome:
     total_s: float
 
 
+@dataclass(frozen=True, eq=False)
+class ReplayStep:
+    """One update of a replay.
+
+    Attributes:
+        edges: `(K,)` edge indices in insertion order: the known inliers (odometry), then the loop closures.
+        loop_placed: `(M,)` pose rows added first, without a value: poses no odometry of the step
+            reaches from a known pose, placed along a loop closure (`egnc.online.state`); mostly empty.
+    """
+
+    edges: np.ndarray
+    loop_placed: np.ndarray
+
+
 def replay_steps(graph: PoseGraph, known_inliers: np.ndarray) -> list[np.ndarray]:
-    """The edges of each step, in replay order (module docstring): a list of `(K_s,)` edge indices."""
+    """The edges of each step, in insertion order (module docstring): a list of `(K_s,)` edge indices."""
+    return [step.edges for step in replay_plan(graph, known_inliers)]
+
+
+def replay_plan(graph: PoseGraph, known_inliers: np.ndarray) -> list[ReplayStep]:
+    """The steps of a replay of `graph` with the `(E,)` bool `known_inliers` (module docstring).
+
+    Raises:
+        GraphError: edges no edge connects to the gauge pose (a disconnected graph).
+    """
     later = graph.edges.max(axis=1)
     order = np.lexsort((np.arange(graph.num_edges), ~known_inliers, later))
     boundaries = np.flatnonzero(np.diff(later[order])) + 1
-    return np.split(order, boundaries)
+    reached = np.zeros(graph.num_poses, dtype=bool)
+    reached[gauge_row(graph)] = True
+    ends, waiting, plan = graph.edges.tolist(), np.zeros(0, dtype=np.int64), []
+    for group in np.split(order, boundaries):
+        if not len(waiting) and _reaches_in_order(group, ends, known_inliers, reached):
+            plan.append(ReplayStep(group, np.zeros(0, dtype=np.int64)))
+            continue
+        step, waiting = _connect(np.sort(np.concatenate((waiting, group))), ends, known_inliers, reached)
+        if len(step.edges):
+            plan.append(step)
+    if len(waiting):
+        first = int(waiting[0])
+        line = int(graph.edge_lines[first])
+        where = f"line {line}" if line else f"edge {first}"
+        i, j = graph.vertex_ids[graph.edges[first]].tolist()
+        gauge = int(graph.vertex_ids[gauge_row(graph)])
+        message = f"edge ({i}, {j}) has no path of edges to the gauge pose {gauge}: a replay cannot place it"
+        raise GraphError(f"{where}: {message}")
+    return plan
+
+
+def _reaches_in_order(group: np.ndarray, ends: list, known: np.ndarray, reached: np.ndarray) -> bool:
+    """Whether the step `group` (odometry first, in order) reaches its poses as the online solver's
+    `add_*` calls require: each odometry edge from a known pose, loop closures between known ones.
+    If so, marks its poses in `reached` `(N,)` bool."""
+    new: set[int] = set()
+    for edge in group.tolist():
+        i, j = ends[edge]
+        known_i, known_j = reached[i] or i in new, reached[j] or j in new
+        if not (known_i or known_j) or (not known[edge] and not (known_i and known_j)):
+            return False
+        new.update((i, j))
+    reached[list(new)] = True
+    return True
+
+
+def _connect(
+    candidates: np.ndarray, ends: list, known: np.ndarray, reached: np.ndarray
+) -> tuple[ReplayStep, np.ndarray]:
+    """The step of the edges `candidates` (file order) that reach a known pose, as `MapState` places
+    them: odometry in passes until none reaches a new pose, then the first loop closure with one
+    known end places the other, and so on. Returns it and the edges still waiting; updates `reached`."""
+    odometry = [edge for edge in candidates.tolist() if known[edge]]
+    loops = [edge for edge in candidates.tolist() if not known[edge]]
+    taken: list[int] = []
+    loop_placed: list[int] = []
+    while True:
+        progress = True
+        while progress:
+            left = []
+            for edge in odometry:
+                i, j = ends[edge]
+                if reached[i] or reached[j]:
+                    taken.append(edge)
+                    reached[i] = reached[j] = True
+                else:
+                    left.append(edge)
+            progress, odometry = len(left) < len(odometry), left
+        placing = next((edge for edge in loops if reached[ends[edge][0]] != reached[ends[edge][1]]), None)
+        if placing is None:
+            break
+        i, j = ends[placing]
+        loop_placed.append(j if reached[i] else i)
+        reached[i] = reached[j] = True
+    taken += [edge for edge in loops if reached[ends[edge][0]] and reached[ends[edge][1]]]
+    chosen = set(taken)
+    waiting = np.array([edge for edge in candidates.tolist() if edge not in chosen], dtype=np.int64)
+    return ReplayStep(np.array(taken, dtype=np.int64), np.array(loop_placed, dtype=np.int64)), waiting
+
+
+def gauge_row(graph: PoseGraph) -> int:
+    """The row of `graph`'s gauge pose: the fixed one, else row 0."""
+    return int(np.flatnonzero(graph.fixed)[0]) if graph.fixed.any() else 0
 
 
 def add_gauge(solver: OnlineSolver, graph: PoseGraph) -> None:
     """Give `solver` the prior of `graph`'s gauge pose (the fixed one, else row 0), as `replay` does."""
-    gauge = int(np.flatnonzero(graph.fixed)[0]) if graph.fixed.any() else 0
+    gauge = gauge_row(graph)
     solver.add_prior(int(graph.vertex_ids[gauge]), graph.poses[gauge])
 
 
-def add_step(solver: OnlineSolver, graph: PoseGraph, edges: np.ndarray, known_inliers: np.ndarray) -> None:
-    """Add one step's `edges` `(K,)` of `graph` to `solver` as `replay` does: the known inliers
-    (`(E,)` bool) as odometry first, then the others as loop closures, in file order."""
+def add_step(solver: OnlineSolver, graph: PoseGraph, step: ReplayStep, known_inliers: np.ndarray) -> None:
+    """Add one `step` of `graph` to `solver` as `replay` does: its loop-placed poses, then its
+    known inliers (`(E,)` bool) as odometry, then the others as loop closures, in its order."""
+    if len(step.loop_placed):
+        solver.add_poses(graph.vertex_ids[step.loop_placed])
+    edges = step.edges
     odometry, loops = edges[known_inliers[edges]], edges[~known_inliers[edges]]
     for batch, add in ((odometry, solver.add_odometry_batch), (loops, solver.add_loops)):
         if len(batch):
@@ -128,18 +247,19 @@ def replay(
         on_step: called after every update with `(step, total_steps, report)`.
 
     Raises:
-        EgncError: the checkpoint belongs to another graph or other settings or cannot be read
-            (`OnlineSolver.load`), or, where it does not exist yet, cannot be written there
-            (checked before the first step).
-        GraphError: a step adds a loop closure to a pose no earlier edge reached.
+        EgncError: the checkpoint belongs to another graph or other settings, cannot be read
+            (`OnlineSolver.load`: damaged, or edited since it was written), holds a graph that is
+            not this one's after its steps, or, where it does not exist yet, cannot be written
+            there (checked before the first step).
+        GraphError: edges no edge connects to the gauge pose (`replay_plan`).
     """
     check_instance("graph", graph, PoseGraph)
     known = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)
     _check_arguments(graph, checkpoint, checkpoint_every, stop_after, on_step)
-    steps = replay_steps(graph, known)
+    steps = replay_plan(graph, known)
     settings = _checkpoint_meta(graph, known, method, online_options or OnlineOptions())
     path = None if checkpoint is None else Path(checkpoint)
-    solver = _resumed(path, settings)
+    solver = _resumed(path, settings, graph, known, steps)
     if solver is None:
         solver = OnlineSolver(
             graph.dim,
@@ -151,7 +271,7 @@ def replay(
         )
         add_gauge(solver, graph)
     done = resumed_from = solver.steps  # one update per step
-    order = np.concatenate(steps) if steps else np.zeros(0, dtype=np.int64)
+    order = np.concatenate([step.edges for step in steps]) if steps else np.zeros(0, dtype=np.int64)
     last = len(steps) if stop_after is None else min(len(steps), stop_after)
     for step in range(done, last):
         add_step(solver, graph, steps[step], known)
@@ -207,9 +327,12 @@ def _checkpoint_meta(graph: PoseGraph, known: np.ndarray, method: str, online_op
     }
 
 
-def _resumed(path: Path | None, settings: dict) -> OnlineSolver | None:
+def _resumed(
+    path: Path | None, settings: dict, graph: PoseGraph, known: np.ndarray, steps: list[ReplayStep]
+) -> OnlineSolver | None:
     """The solver of the checkpoint at `path` when it exists, refused unless it was written with
-    `settings` (`replay`'s checkpoint meta); None otherwise, once `path` (if any) is known writable."""
+    `settings` (`replay`'s checkpoint meta) and holds the first steps of the replay of `graph`
+    (`_check_prefix`); None otherwise, once `path` (if any) is known writable."""
     if path is None:
         return None
     if not path.exists():
@@ -224,7 +347,37 @@ def _resumed(path: Path | None, settings: dict) -> OnlineSolver | None:
         same_graph = saved["fingerprint"] == settings["fingerprint"]
         what = ", ".join(differs) if same_graph else "another graph or edge roles"
         raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
+    _check_prefix(path, solver, graph, known, steps)
     return solver
+
+
+def _check_prefix(
+    path: Path, solver: OnlineSolver, graph: PoseGraph, known: np.ndarray, steps: list[ReplayStep]
+) -> None:
+    """Refuse a checkpoint's `solver` whose graph is not that of the replay's first `solver.steps`
+    `steps` of `graph` (`known`: `(E,)` roles): its poses, edges, roles, measurements and
+    information. Its fingerprint names the input; this catches a checkpoint edited since."""
+    done = solver.steps
+    inserted = np.concatenate([step.edges for step in steps[:done]] or [np.zeros(0, dtype=np.int64)])
+    refuse = f"{path}: the checkpoint's graph is not this input's after {done} steps"
+    if done > len(steps) or len(inserted) != solver.num_edges:
+        raise EgncError(f"{refuse} ({solver.num_edges} edges, expected {len(inserted)}); remove it")
+    ids = graph.vertex_ids[graph.edges[inserted]]
+    gauge = graph.vertex_ids[gauge_row(graph)]
+    if not np.array_equal(np.sort(solver.vertex_ids), np.union1d(ids.ravel(), [gauge])):
+        raise EgncError(f"{refuse} (other poses); remove it")
+    differs = (
+        np.any(solver.edge_ids != ids, axis=1)
+        | (solver.is_loop_closure == known[inserted])
+        | np.any(solver.measurements != graph.measurements[inserted], axis=1)
+        | np.any(solver.information != graph.information[inserted], axis=(1, 2))
+    )
+    if differs.any():
+        first = int(inserted[np.argmax(differs)])
+        line = int(graph.edge_lines[first])
+        where = f" (line {line})" if line else ""
+        i, j = graph.vertex_ids[graph.edges[first]].tolist()
+        raise EgncError(f"{refuse}: its edge ({i}, {j}){where} differs (edited?); remove it")
 
 
 def _in_file_order(result: Result, inserted: np.ndarray, graph: PoseGraph) -> Result:

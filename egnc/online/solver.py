@@ -152,7 +152,9 @@ class OnlineSolver:
         """Add a pose; `pose` `(P,)` (`x y theta` or `x y z qx qy qz qw`) is its initial guess.
 
         Without `pose`, the pose must be reached by an odometry edge added before the next update,
-        which places it by composing the measurement from the other end's current estimate.
+        which places it by composing the measurement from the other end's current estimate; where
+        no odometry of the update reaches it from a placed pose, the first loop closure that does
+        places it the same way (the loop is graduated as any other).
         """
         self.add_poses([vertex_id], None if pose is None else one_row(pose))
 
@@ -335,6 +337,16 @@ class OnlineSolver:
         return self._map.vertex_ids[self._map.edges]
 
     @property
+    def measurements(self) -> np.ndarray:
+        """`(E, P)` measurement of every edge, in insertion order."""
+        return self._map.measurements.copy()
+
+    @property
+    def information(self) -> np.ndarray:
+        """`(E, d, d)` information matrix of every edge, in insertion order."""
+        return self._map.information.copy()
+
+    @property
     def is_loop_closure(self) -> np.ndarray:
         """`(E,)` bool: edges added as loop closures."""
         return self._map.robust.copy()
@@ -418,8 +430,9 @@ class OnlineSolver:
 
         Raises:
             OptionError: `path` is not a file path.
-            EgncError: the file cannot be read, is not an egnc checkpoint of this version, or its
-                entries do not fit together (`egnc.io.checkpoint.read_checkpoint`).
+            EgncError: the file cannot be read, is not an egnc checkpoint of this version, its
+                entries do not fit together, or its content is not that of its digest (edited
+                after it was written; `egnc.io.checkpoint.read_checkpoint`).
         """
         saved, arrays = read_state(path)
         try:

@@ -4,7 +4,8 @@ Rows are in arrival order (a vertex id's row is fixed when the pose is taken in)
 insertion order. Each array grows by appending rows into room kept at its end (`MapState.grow`),
 so an update that only extends the trajectory copies nothing of the map. A new pose is placed by
 composing the odometry that reaches it from the current estimate, so that edge starts at zero
-residual.
+residual; a pose no new odometry reaches from a placed pose is placed, likewise, along the first
+new loop closure that does (the loop is graduated as any other).
 """
 
 from __future__ import annotations
@@ -123,8 +124,9 @@ class MapState:
 
     def _placed(self, pending: Pending, start: int, rows: np.ndarray, Z: np.ndarray, robust: np.ndarray) -> np.ndarray:
         """`(K, n, n)` the new poses (rows from `start`): explicit values, the others composed
-        along the new odometry (`rows` `(M, 2)`, transforms `Z`, `robust` `(M,)`) in arrival order."""
-        n, group = self.dim + 1, group_of(self.dim)
+        along the new odometry (`rows` `(M, 2)`, transforms `Z`, `robust` `(M,)`) in arrival order,
+        or, for a pose no odometry reaches from a placed one, along a new loop closure."""
+        n = self.dim + 1
         new_T = np.zeros((len(pending.pose_ids), n, n))
         placed = np.zeros(len(pending.pose_ids), dtype=bool)  # of the new poses; the others are placed
         for k, value in enumerate(pending.pose_values):
@@ -134,9 +136,34 @@ class MapState:
         if start == 0 and len(placed) and not placed[0]:  # the very first pose, placed by nothing: at the identity
             new_T[0] = np.eye(n)
             placed[0] = True
-        for (i, j), Z_ij, is_loop in zip(rows.tolist(), Z, robust.tolist()):
+        edges = list(zip(rows.tolist(), Z, robust.tolist()))
+        odometry, loops = [edge for edge in edges if not edge[2]], [edge for edge in edges if edge[2]]
+        # One pass over the odometry in arrival order places every pose reached in order. A pose
+        # left over (one reached first by a loop closure, or by odometry that arrived before the
+        # edge placing its other end) is placed by further passes, and when no odometry places
+        # one, by the first loop closure with one end placed (the loop stays a loop).
+        self._place_along(odometry, start, new_T, placed)
+        while not placed.all():
+            if not (
+                self._place_along(odometry, start, new_T, placed)
+                or self._place_along(loops, start, new_T, placed, first_only=True)
+            ):
+                break
+        if not placed.all():
+            unplaced = self.vertex_ids[start:][~placed][:5].tolist()
+            raise GraphError(f"poses {unplaced} have no value and no edge from a placed pose")
+        return new_T
+
+    def _place_along(
+        self, edges: list, start: int, new_T: np.ndarray, placed: np.ndarray, first_only: bool = False
+    ) -> bool:
+        """Place the new poses (rows from `start`, `new_T`, `placed`) that `edges` (row pairs,
+        transforms, loop flags, in arrival order) reach from a placed end, in one pass (only the
+        first such edge with `first_only`). Returns whether one was placed."""
+        group, progress = group_of(self.dim), False
+        for (i, j), Z_ij, _ in edges:
             placed_i, placed_j = i < start or placed[i - start], j < start or placed[j - start]
-            if is_loop or placed_i == placed_j:
+            if placed_i == placed_j:
                 continue
             if placed_i:
                 new_T[j - start] = (self.T[i] if i < start else new_T[i - start]) @ Z_ij
@@ -144,10 +171,10 @@ class MapState:
             else:
                 new_T[i - start] = (self.T[j] if j < start else new_T[j - start]) @ group.inverse(Z_ij)
                 placed[i - start] = True
-        if not placed.all():
-            unplaced = self.vertex_ids[start:][~placed][:5].tolist()
-            raise GraphError(f"poses {unplaced} have no value and no odometry from a placed pose")
-        return new_T
+            progress = True
+            if first_only:
+                break
+        return progress
 
     def grow(self, name: str, rows: np.ndarray) -> None:
         """Append `rows` to the array attribute `name` in time that follows `rows`: the array is
