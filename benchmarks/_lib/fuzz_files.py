@@ -69,7 +69,16 @@ INVALID_OPERATORS = ("huge integer", "long line", "drop header line")
 of 5000 digits is out of range wherever it stands; a 2 MiB line is over the readers' bound; an IRL
 header without one of its five lines shifts the others (without its notes line the PRIOR used to be
 read as the notes)."""
-    "int64 ids", "loop first", "prior later",
+VALID_OPERATORS = ("int64 ids",)
+"""Operators whose every mutant is valid: reading it must give a graph. Ids moved in order to the
+ends of int64 (issue 56: `[int64 min, 1]` was refused as unsorted, `np.diff` wrapping around)."""
+INT64_MIN, INT64_MAX = int(np.iinfo(np.int64).min), int(np.iinfo(np.int64).max)
+ONLINE_OPERATORS = ("loop first", "prior later")
+"""Operators of valid graphs the online replay used to refuse (issue 56): ids `k` and `k + 2` swapped
+(in a g2o file pose `k + 2` is then first reached by a loop closure; in an IRL log, whose odometry
+must reach every pose, by odometry that reaches poses out of order); a g2o `FIX` or the IRL PRIOR
+on a later pose."""
+G2O_ONLY = ("toro", "fix all", "int64 ids")
 IRL_ONLY = ("drop header line",)
 TORO_ORDER = (0, 1, 3, 5, 2, 4)
 """g2o's upper triangle `I11 I12 I13 I22 I23 I33` to TORO's `I11 I12 I22 I33 I13 I23`."""
