@@ -30,7 +30,7 @@ from egnc.cli.outputs import OutputPlan
 from egnc.cli.progress import Progress, StepProgress
 from egnc.cli.report import report_dict, summary
 from egnc.cli.signals import INTERRUPT_EXIT_CODES, Terminated, sigterm_raises
-from egnc.errors import EgncError, EgncWarning, NumericalError
+from egnc.errors import EgncError, EgncWarning, NumericalError, OptionError
 from egnc.graph import PoseGraph
 from egnc.graph.health import UnrepresentableError
 from egnc.io import read_g2o, read_irl
@@ -364,8 +364,9 @@ def located(
 ) -> EgncError:
     """`error` of a solve of the graph read from `input_path`, its message led by `<file>[:<line>]: `.
 
-    An error about one edge (`UnrepresentableError`) names that edge's line; one whose message
-    already starts with the input or one of `own_paths` (a checkpoint's) is returned unchanged.
+    An error about one edge (`UnrepresentableError`) names that edge's line; an `OptionError` (about
+    the command line) and one whose message already starts with the input or one of `own_paths` (a
+    checkpoint's) are returned unchanged.
 
     Args:
         error: what the solve or replay raised.
@@ -377,6 +378,8 @@ def located(
             message names it too.
     """
     message = str(error)
+    if isinstance(error, OptionError):  # about the command line, not the input
+        return error
     if any(path is not None and message.startswith(f"{path}:") for path in (input_path, *own_paths)):
         return error
     edge = error.edge if isinstance(error, UnrepresentableError) else None

@@ -56,7 +56,7 @@ from typing import Any, Literal, Protocol
 import numpy as np
 import scipy.sparse as sp
 
-from egnc.errors import EgncError, SolverError
+from egnc.errors import OptionError, SolverError
 from egnc.graph.checks import check_instance
 from egnc.graph.index_sets import sorted_unique
 
@@ -143,15 +143,15 @@ def resolve_name(name: str) -> Backend:
         return "cholmod" if cholmod_available() else "rslab" if rslab_available() else "scipy"
     if name == "cholmod":
         if not cholmod_available():
-            raise EgncError(f"linear solver 'cholmod' needs {_INSTALL['cholmod']}")
+            raise OptionError(f"linear solver 'cholmod' needs {_INSTALL['cholmod']}")
         return "cholmod"
     if name == "rslab":
         if not rslab_available():
-            raise EgncError(f"linear solver 'rslab' needs {_INSTALL['rslab']}")
+            raise OptionError(f"linear solver 'rslab' needs {_INSTALL['rslab']}")
         return "rslab"
     if name == "scipy":
         return "scipy"
-    raise EgncError(f"unknown linear solver {name!r}: choose 'auto', 'cholmod', 'rslab' or 'scipy'")
+    raise OptionError(f"unknown linear solver {name!r}: choose 'auto', 'cholmod', 'rslab' or 'scipy'")
 
 
 def lower_triangle_only(name: str) -> bool:
