@@ -56,6 +56,8 @@ class Priors:
         information: `(K, d, d)` float64; a position prior's `(dim, dim)` information in the
             top-left corner, zeros elsewhere.
         lines: `(K,)` int64 1-based source line of each prior (0 when not read from a file).
+        param_ids: `(K,)` int64, the g2o `PARAMS_SE3OFFSET` id a 3D prior names (0 by default;
+            unused in 2D), kept so that `write_g2o` writes the record back as read.
 
     The constructor checks shapes, finite values, kinds and positive-definite information (of each
     prior's own dimension), raising `GraphError` naming the prior's index.
@@ -67,6 +69,7 @@ class Priors:
     measurements: np.ndarray
     information: np.ndarray
     lines: np.ndarray = None  # type: ignore[assignment]
+    param_ids: np.ndarray = None  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         p, d = _POSE_SIZE[self.dim], _TANGENT_SIZE[self.dim]
@@ -77,10 +80,13 @@ class Priors:
             object.__setattr__(self, "information", _frozen(self.information, np.float64))
             lines = np.zeros(len(self.rows), dtype=np.int64) if self.lines is None else self.lines
             object.__setattr__(self, "lines", _frozen(lines, np.int64))
+            params = np.zeros(len(self.rows), dtype=np.int64) if self.param_ids is None else self.param_ids
+            object.__setattr__(self, "param_ids", _frozen(params, np.int64))
         except (TypeError, ValueError) as error:
             raise GraphError(f"priors must be arrays of numbers: {error}") from None
         k = len(self.rows)
-        shapes = {"rows": (k,), "kinds": (k,), "measurements": (k, p), "information": (k, d, d), "lines": (k,)}
+        shapes = {"rows": (k,), "kinds": (k,), "measurements": (k, p), "information": (k, d, d), "lines": (k,),
+                  "param_ids": (k,)}
         for name, shape in shapes.items():
             if getattr(self, name).shape != shape:
                 raise GraphError(f"priors.{name} has shape {getattr(self, name).shape}, expected {shape}")
@@ -149,11 +155,11 @@ class Priors:
     def subset(self, keep: np.ndarray) -> Priors:
         """The priors `keep` selects (`(K,)` bool mask or increasing indices), in order."""
         return Priors(self.dim, self.rows[keep], self.kinds[keep], self.measurements[keep], self.information[keep],
-                      self.lines[keep])
+                      self.lines[keep], self.param_ids[keep])
 
     def with_rows(self, rows: np.ndarray) -> Priors:
         """The same priors on other pose rows `(K,)` (a graph's rows renumbered)."""
-        return Priors(self.dim, rows, self.kinds, self.measurements, self.information, self.lines)
+        return Priors(self.dim, rows, self.kinds, self.measurements, self.information, self.lines, self.param_ids)
 
 
 def gauge_jacobian(priors: Priors) -> np.ndarray:
