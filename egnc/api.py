@@ -157,8 +157,14 @@ class Result:
 
     @property
     def rejected_edges(self) -> np.ndarray:
-        """0-based indices, in input-file order, of the edges rejected as outliers."""
-        return np.flatnonzero(~self.inliers)
+        """0-based factor indices (`PoseGraph.edge_factor_index`: every edge and prior line in file
+        order; the edge index when the graph has no prior) of the edges rejected as outliers."""
+        return self.graph.edge_factor_index[~self.inliers]
+
+    @property
+    def rejected_priors(self) -> np.ndarray:
+        """0-based factor indices of the priors rejected as outliers: none, priors are held as known inliers."""
+        return np.zeros(0, dtype=np.int64)
 
 
 class ResultCosts(TypedDict):

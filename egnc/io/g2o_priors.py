@@ -215,7 +215,17 @@ def merged_with_priors(graph: PoseGraph, keep: np.ndarray, edge_text: str) -> st
     """The kept edges' lines `edge_text` and the priors' lines, in the graph's factor order."""
     lines = edge_text.splitlines(keepends=True) + prior_records_text(graph)
     keys = np.concatenate((graph.edge_factor_index[keep], graph.prior_factor_index))
-    return "".join(lines[k] for k in np.argsort(keys, kind="stable").tolist())
+    return _missing_offsets(graph) + "".join(lines[k] for k in np.argsort(keys, kind="stable").tolist())
+
+
+def _missing_offsets(graph: PoseGraph) -> str:
+    """Identity `PARAMS_SE3OFFSET` lines for the ids the 3D priors name and `unknown_lines` do not
+    declare (a graph built in Python), so that g2o and egnc read the file back."""
+    if graph.dim == 2:
+        return ""
+    declared = {line.split()[1] for line in graph.unknown_lines if line.split()[:1] == [PARAMS]}
+    missing = sorted(set(graph.priors.param_ids.tolist()) - {int(k) for k in declared if k.lstrip("-").isdigit()})
+    return "".join(f"{PARAMS} {pid} 0 0 0 0 0 0 1\n" for pid in missing)
 
 
 def counts_text(graph: PoseGraph) -> str:
