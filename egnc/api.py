@@ -20,6 +20,7 @@ from egnc.linalg.linear_solvers import resolve_name
 from egnc.nonlinear.chordal import chordal_initialization
 from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.nonlinear.initialize import initialize_poses
+from egnc.nonlinear.prior_factors import prior_cost
 from egnc.nonlinear.least_squares import (
     NOTHING_TO_OPTIMIZE,
     NUMERICAL_FAILURE,
@@ -234,6 +235,8 @@ def decided_fields(
     """
     d = graph.tangent_dim
     initial_fits = classify_inliers(initial_r, robust, d, gnc_options)
+    # The priors' cost (held quadratic in this release: never rejected) is part of every cost field.
+    priors = (prior_cost(graph.priors, graph.poses), prior_cost(graph.priors, result_poses))
     warnings = solve_warnings(
         graph,
         stages,
@@ -246,9 +249,18 @@ def decided_fields(
         start=start,
         settled=settled,
         disputed=disputed,
+        prior_costs=priors,
     )
+    costs = result_costs(initial_r, r, inliers, robust, d, gnc_options.outlier_quantile)
+    if graph.num_priors:
+        costs = ResultCosts(
+            initial_cost=costs["initial_cost"] + priors[0],
+            cost=costs["cost"] + priors[1],
+            accepted_cost=costs["accepted_cost"] + priors[1],
+            truncated_cost=costs["truncated_cost"] + priors[1],
+        )
     return DecidedFields(
-        **result_costs(initial_r, r, inliers, robust, d, gnc_options.outlier_quantile),
+        **costs,
         iterations=sum(stage.iterations for stage in stages),
         warnings=warnings,
         start=start,

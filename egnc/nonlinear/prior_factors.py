@@ -98,3 +98,11 @@ class PriorFactors:
         J[position, :dim, :dim] = T[self.rows[position], :dim, :dim]
         stacked[:, :, 2 * d] = e
         return Linearization(stacked[:, :, 2 * d], stacked[:, :, :d], J, stacked)
+
+
+def prior_cost(priors: Priors, poses: np.ndarray) -> float:
+    """`0.5 sum r^2` of `priors` at stored pose parameters `poses` `(N, P)`; 0.0 without priors."""
+    if not len(priors):
+        return 0.0
+    factors = PriorFactors.from_priors(priors)
+    return float(0.5 * np.sum(factors.whitened_norms(factors.residuals(to_matrices(priors.dim, poses))) ** 2))
