@@ -20,7 +20,6 @@ from egnc.linalg.linear_solvers import resolve_name
 from egnc.nonlinear.chordal import chordal_initialization
 from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.nonlinear.initialize import initialize_poses
-from egnc.nonlinear.prior_factors import prior_cost
 from egnc.nonlinear.least_squares import (
     NOTHING_TO_OPTIMIZE,
     NUMERICAL_FAILURE,
@@ -30,6 +29,7 @@ from egnc.nonlinear.least_squares import (
     SolverOptions,
 )
 from egnc.nonlinear.marginals import pose_covariances
+from egnc.nonlinear.prior_factors import prior_cost
 from egnc.robust.decision import Decision, StartContext, lower_by_more_than_rounding, truncated_cost
 from egnc.robust.diagnostics import solve_warnings
 from egnc.robust.elimination import elimination_decision

@@ -51,7 +51,12 @@ def chain_graph(dim: int, rng: np.random.Generator, num_poses: int = 8, priors: 
     to_params = group.to_xytheta if dim == 2 else group.to_xyz_quat
     guess = T @ group.exp(rng.normal(scale=0.1, size=(num_poses, d)))
     return PoseGraph(
-        dim, np.arange(num_poses), to_params(guess), edges, to_params(Z), np.tile(np.eye(d) * 10, (len(edges), 1, 1)),
+        dim,
+        np.arange(num_poses),
+        to_params(guess),
+        edges,
+        to_params(Z),
+        np.tile(np.eye(d) * 10, (len(edges), 1, 1)),
         priors=priors,
     )
 
@@ -218,7 +223,9 @@ def test_g2o_priors_are_read_and_written_back_in_file_order(tmp_path, text):
 def test_g2o_refuses_a_non_identity_offset_and_unknown_vertices(tmp_path):
     path = tmp_path / "bad.g2o"
     path.write_text(G2O_3D.replace("PARAMS_SE3OFFSET 7 0 0 0", "PARAMS_SE3OFFSET 7 0.5 0 0"))
-    with pytest.raises(G2oFormatError, match=r"bad.g2o:6: EDGE_SE3_PRIOR names PARAMS_SE3OFFSET 7 \(line 1\), which is not"):
+    with pytest.raises(
+        G2oFormatError, match=r"bad.g2o:6: EDGE_SE3_PRIOR names PARAMS_SE3OFFSET 7 \(line 1\), which is not"
+    ):
         read_g2o(path)
     path.write_text(G2O_2D.replace("EDGE_SE2_XYPRIOR 0", "EDGE_SE2_XYPRIOR 9"))
     with pytest.raises(G2oFormatError, match=r"bad.g2o:5: EDGE_SE2_XYPRIOR names vertex 9"):

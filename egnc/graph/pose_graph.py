@@ -19,6 +19,7 @@ import numpy as np
 
 from egnc.errors import GraphError, OptionError
 from egnc.graph.checks import check_int, describe
+from egnc.graph.priors import Priors
 from egnc.graph.validity import (
     NO_EDGES,
     first_bad_quaternion,
@@ -26,7 +27,6 @@ from egnc.graph.validity import (
     not_positive_definite,
     not_positive_definite_message,
 )
-from egnc.graph.priors import Priors
 
 POSE_SIZE = {2: 3, 3: 7}
 """Number of stored parameters per pose, by spatial dimension."""
@@ -137,7 +137,7 @@ class PoseGraph:
     fixed: np.ndarray = field(default=None)  # type: ignore[arg-type]
     edge_lines: np.ndarray = field(default=None)  # type: ignore[arg-type]
     unknown_lines: tuple[str, ...] = ()
-    priors: Priors = field(default=None)  # type: ignore[arg-type]
+    priors: Priors = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         if not is_dim(self.dim):

@@ -38,7 +38,7 @@ _TANGENT_SIZE = {2: 3, 3: 6}
 
 def _frozen(value: object, dtype: type) -> np.ndarray:
     """A read-only private copy of `value` as `dtype`."""
-    array = np.array(value, dtype=dtype)
+    array: np.ndarray = np.array(value, dtype=dtype)
     array.setflags(write=False)
     return array
 
@@ -85,8 +85,14 @@ class Priors:
         except (TypeError, ValueError) as error:
             raise GraphError(f"priors must be arrays of numbers: {error}") from None
         k = len(self.rows)
-        shapes = {"rows": (k,), "kinds": (k,), "measurements": (k, p), "information": (k, d, d), "lines": (k,),
-                  "param_ids": (k,)}
+        shapes = {
+            "rows": (k,),
+            "kinds": (k,),
+            "measurements": (k, p),
+            "information": (k, d, d),
+            "lines": (k,),
+            "param_ids": (k,),
+        }
         for name, shape in shapes.items():
             if getattr(self, name).shape != shape:
                 raise GraphError(f"priors.{name} has shape {getattr(self, name).shape}, expected {shape}")
@@ -96,7 +102,9 @@ class Priors:
         """Kinds known, values finite, information positive definite on each prior's own block."""
         bad_kind = np.flatnonzero((self.kinds != POSE) & (self.kinds != POSITION))
         if len(bad_kind):
-            raise GraphError(f"prior {bad_kind[0]}: kind must be 0 (pose) or 1 (position), got {self.kinds[bad_kind[0]]}")
+            raise GraphError(
+                f"prior {bad_kind[0]}: kind must be 0 (pose) or 1 (position), got {self.kinds[bad_kind[0]]}"
+            )
         finite = np.isfinite(self.measurements).all(axis=1) & np.isfinite(self.information).all(axis=(1, 2))
         if not finite.all():
             raise GraphError(f"prior {np.flatnonzero(~finite)[0]}: measurement or information is not finite")
@@ -109,8 +117,10 @@ class Priors:
             outside = self.information[chosen].copy()
             outside[:, :m, :m] = 0.0
             if kind == POSITION and np.any(outside):
-                raise GraphError(f"prior {chosen[np.flatnonzero(outside.any(axis=(1, 2)))[0]]}: a position prior's "
-                                 f"information must be zero outside its top-left ({m}, {m}) block")
+                raise GraphError(
+                    f"prior {chosen[np.flatnonzero(outside.any(axis=(1, 2)))[0]]}: a position prior's "
+                    f"information must be zero outside its top-left ({m}, {m}) block"
+                )
             if kind == POSITION and np.any(self.measurements[chosen][:, m:]):
                 raise GraphError("a position prior's measurement must be zero past its coordinates")
 
@@ -122,7 +132,12 @@ class Priors:
 
     @classmethod
     def from_lists(
-        cls, dim: int, rows: list[int], kinds: list[PriorKind], measurements: list[np.ndarray], information: list[np.ndarray]
+        cls,
+        dim: int,
+        rows: list[int],
+        kinds: list[PriorKind],
+        measurements: list[np.ndarray],
+        information: list[np.ndarray],
     ) -> Priors:
         """Build from one entry per prior, each at its own size (`(m,)` or `(P,)` measurement, `(m, m)` information)."""
         p, d = _POSE_SIZE[dim], _TANGENT_SIZE[dim]
@@ -154,8 +169,15 @@ class Priors:
 
     def subset(self, keep: np.ndarray) -> Priors:
         """The priors `keep` selects (`(K,)` bool mask or increasing indices), in order."""
-        return Priors(self.dim, self.rows[keep], self.kinds[keep], self.measurements[keep], self.information[keep],
-                      self.lines[keep], self.param_ids[keep])
+        return Priors(
+            self.dim,
+            self.rows[keep],
+            self.kinds[keep],
+            self.measurements[keep],
+            self.information[keep],
+            self.lines[keep],
+            self.param_ids[keep],
+        )
 
     def with_rows(self, rows: np.ndarray) -> Priors:
         """The same priors on other pose rows `(K,)` (a graph's rows renumbered)."""

@@ -213,7 +213,7 @@ def read_g2o(
         fixed=fixed,
         edge_lines=edges.lines,
         unknown_lines=tuple(unknown) + tuple(context.priors.param_lines if context.priors else ()),
-        priors=priors_of(context.priors, dim, all_ids, context.error) if context.priors else None,
+        priors=priors_of(context.priors, dim, all_ids, context.error) if context.priors else None,  # type: ignore[arg-type]
     )
     for note in notes:
         warnings.warn(note, EgncWarning, stacklevel=2)

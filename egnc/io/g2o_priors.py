@@ -89,12 +89,13 @@ class PriorRecords:
 
 def split_prior_lines(text: str, error: ErrorFactory) -> tuple[str, PriorRecords | None]:
     """The text with its prior and `PARAMS_SE3OFFSET` lines blanked (line numbers kept), and those
-    records parsed; `(text, None)` unchanged when no such tag occurs in it.
+    records parsed; `(text, None)` unchanged when no prior tag occurs in it (its `PARAMS_SE3OFFSET`
+    lines are then unknown tags, as before priors were read).
 
     Raises:
         G2oFormatError: a prior or parameter line with a wrong field count or a bad number or id.
     """
-    if not any(name in text for name in (*PRIOR_TAGS, PARAMS)):
+    if not any(name in text for name in PRIOR_TAGS):  # a file without priors is read as before
         return text, None
     lines = text.split("\n")
     records = PriorRecords()
@@ -129,8 +130,9 @@ def _parse_params(fields: list[str], number: int, records: PriorRecords, error: 
 def _parse_prior(tag: PriorTag, fields: list[str], number: int, records: PriorRecords, error: ErrorFactory) -> None:
     """One prior record of `tag`'s layout."""
     if len(fields) - 1 != tag.num_fields:
-        raise error(f"{tag.name} needs {tag.num_fields} fields after the tag ({tag.layout}), found {len(fields) - 1}",
-                    number)
+        raise error(
+            f"{tag.name} needs {tag.num_fields} fields after the tag ({tag.layout}), found {len(fields) - 1}", number
+        )
     ids = [parse_id(token) for token in fields[1 : 2 + tag.has_param]]
     values = parse_floats(fields[2 + tag.has_param :])
     if None in ids:
@@ -178,7 +180,8 @@ def priors_of(records: PriorRecords, dim: int, all_ids: np.ndarray, error: Error
     rows = np.searchsorted(all_ids, np.asarray(records.ids, dtype=np.int64))
     kinds = [tag.kind for tag in records.tags]
     built = Priors.from_lists(dim, rows.tolist(), kinds, measurements, information)  # type: ignore[arg-type]
-    return Priors(dim, built.rows, built.kinds, built.measurements, built.information, records.lines, records.param_ids)
+    lines, param_ids = np.array(records.lines, dtype=np.int64), np.array(records.param_ids, dtype=np.int64)
+    return Priors(dim, built.rows, built.kinds, built.measurements, built.information, lines, param_ids)
 
 
 def _check_offset(tag: PriorTag, pid: int, records: PriorRecords, number: int, error: ErrorFactory) -> None:

@@ -254,7 +254,8 @@ class Problem:
         built (`BetweenFactors.subset` of a larger graph's)."""
         priors = PriorFactors.from_priors(graph.priors) if graph.num_priors else None
         fixed = gauge_fixed(graph) if graph.num_priors else graph.fixed
-        return cls.from_factors(factors or BetweenFactors.from_graph(graph), fixed, linear_solver, fill_reducing, priors)
+        factors = factors or BetweenFactors.from_graph(graph)
+        return cls.from_factors(factors, fixed, linear_solver, fill_reducing, priors)
 
     @classmethod
     def from_factors(
@@ -464,7 +465,9 @@ class _Run:
             trusted = self.trusted
             if self.problem.priors is not None:  # after the edges, as edges from the virtual pose
                 products, weights, trusted = _with_priors(self.problem.priors, self.point.T, products, weights, trusted)
-            gradient, diagonal = steps.set_system(products, weights, options.linear_method, options.trust_weight, trusted)
+            gradient, diagonal = steps.set_system(
+                products, weights, options.linear_method, options.trust_weight, trusted
+            )
             # Freed before the next linearization builds its own (each about 100 MB on a
             # 50 000-pose 3D grid, where they set the robust solve's peak memory); a CG step's
             # products stay with the step solver until `discard_factorization` above.

@@ -43,9 +43,7 @@ def gauge_fixed(graph: PoseGraph) -> np.ndarray:
     return fixed
 
 
-def with_prior_anchor(
-    edges: np.ndarray, fixed: np.ndarray, priors: PriorFactors
-) -> tuple[np.ndarray, np.ndarray]:
+def with_prior_anchor(edges: np.ndarray, fixed: np.ndarray, priors: PriorFactors) -> tuple[np.ndarray, np.ndarray]:
     """`(E + K, 2)` edges then one edge `(N, row)` per prior, and `(N + 1,)` fixed with the virtual pose held."""
     anchor = np.full(len(priors), len(fixed), dtype=np.int64)
     prior_edges = np.stack((anchor, priors.rows), axis=1)

@@ -84,8 +84,9 @@ def solve_warnings(
     initial_cost = 0.5 * float(np.sum(initial_r[inliers] ** 2)) + prior_costs[0]
     final_cost = 0.5 * float(np.sum(final_r[inliers] ** 2)) + prior_costs[1]
     if final_cost > initial_cost:
+        priors = " and the priors" if any(prior_costs) else ""
         warnings.append(
-            f"the least-squares cost over the accepted edges{' and the priors' if any(prior_costs) else ''} rose from {initial_cost:.6g} at the initial guess"
+            f"the least-squares cost over the accepted edges{priors} rose from {initial_cost:.6g} at the initial guess"
             f" to {final_cost:.6g}: the solve made the guess worse"
         )
     known = ~robust
