@@ -328,3 +328,19 @@ def test_least_squares_optimum_with_priors_equals_gtsam(dim):
     for k in range(graph.num_poses):
         pose = expected.atPose2(k) if dim == 2 else expected.atPose3(k)
         np.testing.assert_allclose(result.poses[k], pose.matrix(), atol=1e-6)
+
+
+def test_gnss_priors_from_a_clean_optimum_change_nothing_and_are_never_rejected(tmp_path):
+    from egnc.datasets import add_position_priors, grid_world
+
+    graph = grid_world(2, num_poses=60, seed=4).graph
+    optimum = egnc.solve(graph, "l2").graph.poses
+    with_priors = add_position_priors(graph, optimum, every=10, sigma=0.01, seed=1)
+    assert with_priors.num_priors == 6
+    np.testing.assert_array_equal(with_priors.prior_factor_index, graph.num_edges + np.arange(6))
+    result = egnc.solve(with_priors)
+    assert result.converged and len(result.rejected_edges) == 0
+    least_squares = solve_least_squares(Problem.from_graph(with_priors), to_matrices(2, with_priors.poses))
+    assert result.cost == pytest.approx(least_squares.cost, rel=1e-6)
+    write_g2o(with_priors, tmp_path / "gnss.g2o")
+    assert read_g2o(tmp_path / "gnss.g2o").priors.counts() == {"pose": 0, "position": 6}
