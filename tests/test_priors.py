@@ -344,3 +344,12 @@ def test_gnss_priors_from_a_clean_optimum_change_nothing_and_are_never_rejected(
     assert result.cost == pytest.approx(least_squares.cost, rel=1e-6)
     write_g2o(with_priors, tmp_path / "gnss.g2o")
     assert read_g2o(tmp_path / "gnss.g2o").priors.counts() == {"pose": 0, "position": 6}
+
+
+def test_marginal_covariances_of_a_graph_held_by_priors(tmp_path):
+    path = tmp_path / "in.g2o"
+    path.write_text(G2O_2D)
+    result = egnc.solve(read_g2o(path), "l2")
+    covariances = egnc.marginal_covariances(result)
+    assert covariances.shape == (3, 3, 3) and np.all(np.linalg.eigvalsh(covariances) > 0)
+    assert np.linalg.eigvalsh(covariances[0]).max() < 1.0  # pose 0 is held by its prior, not fixed

@@ -48,7 +48,7 @@ from egnc.linalg.normal_equations import NormalEquationsPattern, edge_products
 from egnc.linalg.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, WholeSystem, dot
 from egnc.nonlinear.factors import BetweenFactors, EdgeErrors, group_of
 from egnc.nonlinear.prior_factors import PriorFactors
-from egnc.nonlinear.prior_gauge import gauge_fixed, with_prior_anchor
+from egnc.nonlinear.prior_gauge import gauge_fixed, with_prior_anchor, with_prior_products
 
 STATUS_MESSAGES = {
     0: "maximum number of iterations reached",
@@ -464,7 +464,9 @@ class _Run:
             products = edge_products(linearization, factors.information, weights)
             trusted = self.trusted
             if self.problem.priors is not None:  # after the edges, as edges from the virtual pose
-                products, weights, trusted = _with_priors(self.problem.priors, self.point.T, products, weights, trusted)
+                products, weights, trusted = with_prior_products(
+                    self.problem.priors, self.point.T, products, weights, trusted
+                )
             gradient, diagonal = steps.set_system(
                 products, weights, options.linear_method, options.trust_weight, trusted
             )
@@ -545,15 +547,3 @@ class _Run:
             errors=point.errors if keep_errors else None,
             prior_norms=point.prior_r,
         )
-
-
-def _with_priors(
-    priors: PriorFactors, T: np.ndarray, products: np.ndarray, weights: np.ndarray, trusted: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The edges' products `(E, 2d, 2d + 1)`, weights `(E,)` and trusted mask followed by the
-    priors' (weight 1, trusted): the rows of the system `Problem.from_factors` built."""
-    ones = np.ones(len(priors))
-    prior_products = edge_products(priors.linearize(T), priors.information, ones)
-    if trusted is not None:
-        trusted = np.concatenate((trusted, np.ones(len(priors), dtype=bool)))
-    return np.concatenate((products, prior_products)), np.concatenate((weights, ones)), trusted

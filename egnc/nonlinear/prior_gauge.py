@@ -23,6 +23,7 @@ import numpy as np
 from egnc.errors import EgncWarning
 from egnc.graph import PoseGraph
 from egnc.graph.priors import unpinned_directions
+from egnc.linalg.normal_equations import edge_products
 from egnc.nonlinear.prior_factors import PriorFactors
 
 
@@ -48,3 +49,16 @@ def with_prior_anchor(edges: np.ndarray, fixed: np.ndarray, priors: PriorFactors
     anchor = np.full(len(priors), len(fixed), dtype=np.int64)
     prior_edges = np.stack((anchor, priors.rows), axis=1)
     return np.concatenate((edges, prior_edges)), np.append(fixed, True)
+
+
+def with_prior_products(
+    priors: PriorFactors, T: np.ndarray, products: np.ndarray, weights: np.ndarray, trusted: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The edges' normal-equation products `(E, 2d, 2d + 1)`, weights `(E,)` and trusted mask
+    followed by the priors' at poses `T` `(N, n, n)` (weight 1, trusted): the rows of the system
+    `with_prior_anchor` lays out."""
+    ones = np.ones(len(priors))
+    prior_products = edge_products(priors.linearize(T), priors.information, ones)
+    if trusted is not None:
+        trusted = np.concatenate((trusted, np.ones(len(priors), dtype=bool)))
+    return np.concatenate((products, prior_products)), np.concatenate((weights, ones)), trusted
