@@ -17,6 +17,7 @@ import numpy as np
 
 from egnc.api import Result
 from egnc.graph.connectivity import describe_ids
+from egnc.io.g2o_priors import counts_text
 from egnc.online.replay import ReplayOutcome, latency_summary
 from egnc.robust.gnc import StageReport, iteration_limited
 
@@ -69,6 +70,8 @@ def report_dict(result: Result, warnings: list[str], online: ReplayOutcome | Non
         "stages": [_stage(stage) for stage in result.stages],
         "timings_s": result.timings,
     }
+    if graph.num_priors:  # factor indices count edges and priors in file order (docs/g2o.md)
+        report.update(priors=graph.priors.counts(), rejected_priors=result.rejected_priors.tolist())
     if online is not None:
         report["online"] = _online(online)
     notes = [*warnings, *result.warnings]
@@ -156,9 +159,10 @@ def summary(result: Result, written: list[Path]) -> str:
         stopped += f"; warnings: {len(result.warnings)}, read them before trusting the result"
     lines = [
         f"poses {graph.num_poses}, edges {graph.num_edges}, loop closures {int(graph.is_loop_closure.sum())}"
-        f" ({graph.dim}D)",
+        f"{', ' + counts_text(graph) if graph.num_priors else ''} ({graph.dim}D)",
         f"method {result.method}, linear solver {result.linear_solver}",
         f"least-squares cost {result.accepted_cost:.10g} over the {int(result.inliers.sum())} accepted edges"
+        f"{f' and {graph.num_priors} priors' if graph.num_priors else ''}"
         f" ({result.cost:.10g} over all {graph.num_edges} edges, rejected ones included)",
         f"{len(result.stages)} stages, {result.iterations} iterations ({stopped})",
         f"rejected {len(result.rejected_edges)} of {int((~result.known_inliers).sum())} loop closures"

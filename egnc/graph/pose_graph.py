@@ -20,6 +20,7 @@ import numpy as np
 
 from egnc.errors import GraphError, OptionError
 from egnc.graph.checks import check_int, describe
+from egnc.graph.priors import Priors
 from egnc.graph.validity import (
     NO_EDGES,
     first_bad_quaternion,
@@ -127,6 +128,9 @@ class PoseGraph:
         unknown_lines: lines of the source file with tags egnc does not read (landmarks,
             parameters, ...), verbatim, kept by `read_g2o(skip_unknown=True)` so that
             `write_g2o` writes them back.
+        priors: the absolute measurements of single poses (`egnc.graph.priors.Priors`), none by
+            default. Edges and priors together are the graph's factors, numbered in file order
+            (`edge_factor_index`, `prior_factor_index`).
 
     The constructor checks what the readers check (`egnc.graph.validity`, same wording, naming the edge
     index): at least one edge, no edge from a vertex to itself, positive-definite information,
@@ -144,6 +148,7 @@ class PoseGraph:
     fixed: np.ndarray = field(default=None)  # type: ignore[arg-type]
     edge_lines: np.ndarray = field(default=None)  # type: ignore[arg-type]
     unknown_lines: tuple[str, ...] = ()
+    priors: Priors = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         if not is_dim(self.dim):
@@ -175,6 +180,18 @@ class PoseGraph:
                 raise GraphError(f"{name} has shape {actual}, expected {shape}")
         self._check_edges(new)
         object.__setattr__(self, "unknown_lines", _lines(self.unknown_lines))
+        self._check_priors()
+
+    def _check_priors(self) -> None:
+        """Default to no prior; a given one must be a `Priors` of this dimension on rows in range."""
+        if self.priors is None:
+            object.__setattr__(self, "priors", Priors.empty(self.dim))
+        if not isinstance(self.priors, Priors):
+            raise GraphError(f"priors must be an egnc.graph.priors.Priors, got {describe(self.priors)}")
+        if self.priors.dim != self.dim:
+            raise GraphError(f"priors are {self.priors.dim}D but the graph is {self.dim}D")
+        if len(self.priors) and (self.priors.rows.min() < 0 or self.priors.rows.max() >= self.num_poses):
+            raise GraphError("priors refer to vertex rows outside [0, N)")
 
     def _check_edges(self, new: set[str]) -> None:
         """The reader's checks (`egnc.graph.validity`), on the arrays not already checked by another graph."""
@@ -201,7 +218,8 @@ class PoseGraph:
         """Sizes only: the arrays of a real graph would fill the screen."""
         return (
             f"PoseGraph(dim={self.dim}, poses={self.num_poses}, edges={self.num_edges},"
-            f" loop_closures={int(np.count_nonzero(self.is_loop_closure))}, fixed={int(np.count_nonzero(self.fixed))})"
+            f" loop_closures={int(np.count_nonzero(self.is_loop_closure))}, fixed={int(np.count_nonzero(self.fixed))}"
+            + (f", priors={len(self.priors)})" if len(self.priors) else ")")
         )
 
     @property
@@ -213,6 +231,31 @@ class PoseGraph:
     def num_edges(self) -> int:
         """Number of edges E."""
         return len(self.edges)
+
+    @property
+    def num_priors(self) -> int:
+        """Number of priors K."""
+        return len(self.priors)
+
+    @property
+    def edge_factor_index(self) -> np.ndarray:
+        """`(E,)` int64 factor index of each edge: its rank among the edges and priors in file
+        order (source line; without lines, edges before priors). `arange(E)` without priors."""
+        return self._factor_index()[: self.num_edges]
+
+    @property
+    def prior_factor_index(self) -> np.ndarray:
+        """`(K,)` int64 factor index of each prior (`edge_factor_index`)."""
+        return self._factor_index()[self.num_edges :]
+
+    def _factor_index(self) -> np.ndarray:
+        """`(E + K,)` factor index of the edges then the priors."""
+        if not self.num_priors:
+            return np.arange(self.num_edges)
+        order = np.argsort(np.concatenate((self.edge_lines, self.priors.lines)), kind="stable")
+        index = np.empty(len(order), dtype=np.int64)
+        index[order] = np.arange(len(order))
+        return index
 
     @property
     def tangent_dim(self) -> int:
@@ -261,6 +304,7 @@ class PoseGraph:
         if count > self.num_poses:
             raise OptionError(f"count must be at most the {self.num_poses} poses, got {count}")
         keep = (self.edges < count).all(axis=1)
+        keep_priors = self.priors.rows < count
         return PoseGraph(
             self.dim,
             self.vertex_ids[:count],
@@ -270,6 +314,7 @@ class PoseGraph:
             self.information[keep],
             fixed=self.fixed[:count],
             edge_lines=self.edge_lines[keep],
+            priors=self.priors.subset(keep_priors),
         )
 
     def subgraph_edges(self, keep: np.ndarray) -> PoseGraph:

@@ -8,6 +8,9 @@ ignored; numbers follow the grammar of `egnc.io.numbers`:
 - `VERTEX_SE3:QUAT id x y z qx qy qz qw`
 - `EDGE_SE3:QUAT i j dx dy dz qx qy qz qw` + 21 information entries
 - `FIX id [id ...]`
+- priors: `EDGE_SE2_PRIOR`, `EDGE_SE2_XYPRIOR`, `EDGE_SE3_PRIOR`, `EDGE_SE3_XYZPRIOR` and the
+  `PARAMS_SE3OFFSET` they name (`egnc.io.g2o_priors`); edges and priors are the graph's factors,
+  numbered in file order (`PoseGraph.edge_factor_index`, `prior_factor_index`).
 - TORO's 2D records, as GTSAM's `load2D` reads them: `VERTEX2 id x y theta`, and
   `EDGE2 i j dx dy dtheta I11 I12 I22 I33 I13 I23`: the information matrix in TORO's order
   (`inf_ff inf_fs inf_ss inf_rr inf_fr inf_sr`; GTSAM's `NoiseFormatTORO`, checked against the
@@ -50,6 +53,7 @@ from egnc.graph.validity import (
     not_positive_definite_message,
 )
 from egnc.io.atomic import atomic_text_file
+from egnc.io.g2o_priors import PriorRecords, merged_with_priors, priors_of, split_prior_lines
 from egnc.io.information import INFORMATION_MODES, InformationMode, repair_information
 from egnc.io.numbers import check_line_characters, is_float, parse_floats, parse_id, parse_integers, shown
 from egnc.io.plain_records import plain_records
@@ -140,6 +144,7 @@ class _Context:
         self.path = path
         # A last line without a newline that fails to parse was most likely cut short.
         self.cut_line = num_lines if text and not text.endswith("\n") else None
+        self.priors: PriorRecords | None = None  # the file's prior records (`egnc.io.g2o_priors`)
 
     def error(self, message: str, line: int | None = None) -> G2oFormatError:
         """Build the error to raise, flagging a probably truncated last line."""
@@ -207,7 +212,8 @@ def read_g2o(
         information=information_matrices,
         fixed=fixed,
         edge_lines=edges.lines,
-        unknown_lines=tuple(unknown),
+        unknown_lines=tuple(unknown) + tuple(context.priors.param_lines if context.priors else ()),
+        priors=priors_of(context.priors, dim, all_ids, context.error) if context.priors else None,  # type: ignore[arg-type]
     )
     for note in notes:
         warnings.warn(note, EgncWarning, stacklevel=2)
@@ -221,8 +227,9 @@ def _read_tables(path: Path, skip_unknown: bool) -> tuple[int, _Table, _Table, _
     line-by-line one that names the line.
     """
     text = read_text(path)
+    context = _Context(path, text, text.count("\n") + 1)
+    text, context.priors = split_prior_lines(text, context.error)
     lines = text.split("\n")
-    context = _Context(path, text, len(lines))
     plain = _plain_tables(text, lines) if _NOT_PLAIN_TEXT.search(text) is None else None
     if plain is not None:
         dim, vertices, edges, fixes = plain
@@ -288,7 +295,8 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, *, keep_edges: np.ndarr
     """Write a graph as g2o text, atomically: the file is complete or untouched.
 
     Vertices are written in id order, then FIX lines, then `graph.unknown_lines` (landmarks,
-    parameters, ... skipped by `read_g2o`, verbatim and in file order), then edges in graph order.
+    parameters, ... skipped by `read_g2o`, verbatim and in file order), then edges in graph order,
+    the priors among them in factor order (`egnc.io.g2o_priors.merged_with_priors`).
     Floats are written with `repr`, so reading the file back gives bit-identical arrays. Only the
     upper triangle of each information matrix is written (the g2o convention).
 
@@ -321,7 +329,8 @@ def write_g2o(graph: PoseGraph, path: str | os.PathLike, *, keep_edges: np.ndarr
         edge_values = np.concatenate(
             (graph.measurements[keep], graph.information[keep][:, rows_upper, cols_upper]), axis=1
         )
-        out.write(_format_records(edge_tag.name, graph.vertex_ids[graph.edges[keep]], edge_values))
+        edge_text = _format_records(edge_tag.name, graph.vertex_ids[graph.edges[keep]], edge_values)
+        out.write(merged_with_priors(graph, keep, edge_text) if graph.num_priors else edge_text)
 
 
 def _split_records(

@@ -47,6 +47,8 @@ from egnc.linalg.linear_solvers import LinearSolver, NotPositiveDefiniteError, r
 from egnc.linalg.normal_equations import NormalEquationsPattern, edge_products
 from egnc.linalg.step_solver import LINEAR_METHODS, LinearMethod, LinearStatistics, StepSolver, WholeSystem, dot
 from egnc.nonlinear.factors import BetweenFactors, EdgeErrors, group_of
+from egnc.nonlinear.prior_factors import PriorFactors
+from egnc.nonlinear.prior_gauge import gauge_fixed, with_prior_anchor, with_prior_products
 
 STATUS_MESSAGES = {
     0: "maximum number of iterations reached",
@@ -164,7 +166,7 @@ class SolverResult:
     Attributes:
         poses: `(N, n, n)` optimized pose matrices.
         residual_norms: `(E,)` whitened residual norms `r` at the solution (unweighted).
-        cost: final total cost `sum rho(r)`.
+        cost: final total cost `sum rho(r)` (plus `0.5 r^2` of each prior).
         cost_history: `(K + 1,)` cost before the first and after each accepted step.
         iterations: accepted steps K.
         linear_solves: factorizations performed (rejected LM steps included).
@@ -199,6 +201,8 @@ class SolverResult:
     step_damping: float = 0.0
     next_damping: float = 0.0
     errors: EdgeErrors | None = None
+    prior_norms: np.ndarray | None = None
+    """`(K,)` whitened residual norms of the priors at the solution, None without priors."""
 
     @property
     def converged(self) -> bool:
@@ -218,12 +222,15 @@ class Problem:
         system: the normal equations of every edge (`egnc.linalg.step_solver.WholeSystem`): the layout
             of the unknowns, and the pattern and direct solver, built at first use.
         step_solver: the step solver over `system` (`egnc.linalg.step_solver`).
+        priors: the graph's priors, held quadratic, or None. They enter the linear layer as
+            edges from a fixed virtual pose (row N, `egnc.nonlinear.prior_gauge`).
     """
 
     factors: BetweenFactors
     fixed: np.ndarray
     system: WholeSystem
     step_solver: StepSolver
+    priors: PriorFactors | None = None
 
     @property
     def pattern(self) -> NormalEquationsPattern:
@@ -245,11 +252,19 @@ class Problem:
     ) -> Problem:
         """Prepare `graph` for solving (`from_factors`); `factors`: the graph's factors if already
         built (`BetweenFactors.subset` of a larger graph's)."""
-        return cls.from_factors(factors or BetweenFactors.from_graph(graph), graph.fixed, linear_solver, fill_reducing)
+        priors = PriorFactors.from_priors(graph.priors) if graph.num_priors else None
+        fixed = gauge_fixed(graph) if graph.num_priors else graph.fixed
+        factors = factors or BetweenFactors.from_graph(graph)
+        return cls.from_factors(factors, fixed, linear_solver, fill_reducing, priors)
 
     @classmethod
     def from_factors(
-        cls, factors: BetweenFactors, fixed: np.ndarray, linear_solver: str = "auto", fill_reducing: bool = True
+        cls,
+        factors: BetweenFactors,
+        fixed: np.ndarray,
+        linear_solver: str = "auto",
+        fill_reducing: bool = True,
+        priors: PriorFactors | None = None,
     ) -> Problem:
         """Prepare the poses joined by `factors` for solving; the gauge is fixed on pose 0 unless
         some poses are fixed.
@@ -257,16 +272,18 @@ class Problem:
         `fixed`: `(N,)` bool, the poses held. `fill_reducing`: False leaves the whole system in
         pose-row order, without computing a fill-reducing order, for a problem solved once by CG
         with a given trusted set (the online solver's): its direct solver then orders the system
-        itself if a CG step falls back to it.
+        itself if a CG step falls back to it. `priors`: held quadratic; with them, no pose is fixed
+        here (`egnc.nonlinear.prior_gauge.gauge_fixed` decides).
         """
         backend = resolve_name(linear_solver)
         fixed = np.array(fixed, dtype=bool)
-        if not fixed.any():
+        if not fixed.any() and priors is None:
             fixed[0] = True
         d = factors.information.shape[-1]
+        edges, all_fixed = (factors.edges, fixed) if priors is None else with_prior_anchor(factors.edges, fixed, priors)
         # Unknown blocks in a fill-reducing order of the free poses, computed once.
-        system = WholeSystem(factors.edges, fixed, d, backend, fill_reducing)
-        return cls(factors, fixed, system, StepSolver(factors.edges, fixed, d, backend, system))
+        system = WholeSystem(edges, all_fixed, d, backend, fill_reducing)
+        return cls(factors, fixed, system, StepSolver(edges, all_fixed, d, backend, system), priors)
 
     @property
     def num_poses(self) -> int:
@@ -288,8 +305,8 @@ class Problem:
     @cached_property
     def _free_blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """`(N,)` bool, the free poses, and `(num_free,)` the unknown block of each, in pose order."""
-        free = self.system.free_index >= 0
-        return free, self.system.free_index[free]
+        free = self.system.free_index[: self.num_poses] >= 0  # past N: the priors' virtual pose
+        return free, self.system.free_index[: self.num_poses][free]
 
 
 class _Clock:
@@ -360,6 +377,7 @@ class _Point:
     errors: EdgeErrors
     r: np.ndarray
     cost: float
+    prior_r: np.ndarray | None = None
 
 
 class _Run:
@@ -390,7 +408,11 @@ class _Run:
         factors = self.problem.factors
         errors = factors.evaluate(T) if known is None else known
         r = factors.whitened_norms(errors.residuals)
-        return _Point(T, errors, r, float(np.sum(self.loss.cost(r))))
+        priors = self.problem.priors
+        if priors is None:
+            return _Point(T, errors, r, float(np.sum(self.loss.cost(r))))
+        prior_r = priors.whitened_norms(priors.residuals(T))
+        return _Point(T, errors, r, float(np.sum(self.loss.cost(r)) + 0.5 * np.sum(prior_r**2)), prior_r)
 
     def start(self, T: np.ndarray, errors: EdgeErrors | None) -> None:
         """Evaluate the initial poses `T` `(N, n, n)`."""
@@ -440,8 +462,13 @@ class _Run:
         with self.clock("assemble"):
             weights = self.loss.weight(self.point.r)
             products = edge_products(linearization, factors.information, weights)
+            trusted = self.trusted
+            if self.problem.priors is not None:  # after the edges, as edges from the virtual pose
+                products, weights, trusted = with_prior_products(
+                    self.problem.priors, self.point.T, products, weights, trusted
+                )
             gradient, diagonal = steps.set_system(
-                products, weights, options.linear_method, options.trust_weight, self.trusted
+                products, weights, options.linear_method, options.trust_weight, trusted
             )
             # Freed before the next linearization builds its own (each about 100 MB on a
             # 50 000-pose 3D grid, where they set the robust solve's peak memory); a CG step's
@@ -518,4 +545,5 @@ class _Run:
             step_damping=self.step_damping,
             next_damping=self.damping if self.use_damping else 0.0,
             errors=point.errors if keep_errors else None,
+            prior_norms=point.prior_r,
         )

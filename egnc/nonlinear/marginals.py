@@ -47,9 +47,10 @@ from egnc.linalg.linear_solvers import (
     exact_factor_pattern,
     serial_native_threads,
 )
-from egnc.linalg.normal_equations import NormalEquationsPattern
+from egnc.linalg.normal_equations import NormalEquationsPattern, edge_products
 from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import Problem
+from egnc.nonlinear.prior_gauge import with_prior_products
 
 _MAX_RHS_VALUES = 2**24
 """Largest `n x columns` right-hand side solved at once (128 MiB of float64)."""
@@ -138,7 +139,11 @@ def covariance_solver(problem: Problem, poses: np.ndarray, weights: np.ndarray |
     factors = problem.factors
     linearization = factors.linearize(poses)
     weights = np.ones(len(factors.edges)) if weights is None else weights
-    data, _ = problem.pattern.assemble(linearization, factors.information, weights)
+    if problem.priors is None:
+        data, _ = problem.pattern.assemble(linearization, factors.information, weights)
+    else:  # the pattern holds the priors after the edges (`egnc.nonlinear.prior_gauge`)
+        products = edge_products(linearization, factors.information, weights)
+        data, _ = problem.pattern.scatter(with_prior_products(problem.priors, poses, products, weights, None)[0])
     return problem.linear_solver.factorize(data)
 
 
@@ -227,6 +232,8 @@ def require_anchored(problem: Problem, vertex_ids: np.ndarray | None = None) -> 
     count, labels = connected_components(problem.num_poses, problem.factors.edges)
     anchored = np.zeros(count, dtype=bool)
     anchored[labels[problem.fixed]] = True
+    if problem.priors is not None and not problem.fixed.any():  # the priors pin the gauge
+        anchored[labels[problem.priors.rows]] = True
     loose = np.flatnonzero(~anchored[labels])
     if not len(loose):
         return

@@ -37,6 +37,7 @@ def solve_warnings(
     start: str = "guess",
     settled: bool = True,
     disputed: np.ndarray | None = None,
+    prior_costs: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[str, ...]:
     """The warnings of one solve, in the order the checks run.
 
@@ -53,6 +54,7 @@ def solve_warnings(
             (`egnc.robust.decision.Decision.settled`).
         disputed: `(E,)` bool, loops the kept decision rejects and another start's decision
             accepted (`egnc.robust.starts`, `egnc.robust.elimination`); None when only one start decided.
+        prior_costs: the priors' cost `0.5 sum r^2` at the initial guess and at the result.
     """
     warnings = [
         f"stage {k} stopped at its iteration limit ({stages[k - 1].iterations} iterations): the result may not"
@@ -79,11 +81,12 @@ def solve_warnings(
             f"{num_rejected} of {num_loops} loop closures were rejected (more than half): either most are false,"
             " or the information matrices are far too confident for this data, or the initial guess is poor"
         )
-    initial_cost = 0.5 * float(np.sum(initial_r[inliers] ** 2))
-    final_cost = 0.5 * float(np.sum(final_r[inliers] ** 2))
+    initial_cost = 0.5 * float(np.sum(initial_r[inliers] ** 2)) + prior_costs[0]
+    final_cost = 0.5 * float(np.sum(final_r[inliers] ** 2)) + prior_costs[1]
     if final_cost > initial_cost:
+        priors = " and the priors" if any(prior_costs) else ""
         warnings.append(
-            f"the least-squares cost over the accepted edges rose from {initial_cost:.6g} at the initial guess"
+            f"the least-squares cost over the accepted edges{priors} rose from {initial_cost:.6g} at the initial guess"
             f" to {final_cost:.6g}: the solve made the guess worse"
         )
     warnings += _known_inliers_disagree(graph, ~robust, final_r)

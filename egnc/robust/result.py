@@ -11,6 +11,7 @@ import numpy as np
 from egnc.graph import PoseGraph
 from egnc.nonlinear.factors import BetweenFactors, to_matrices
 from egnc.nonlinear.least_squares import NOTHING_TO_OPTIMIZE, STATUS_MESSAGES
+from egnc.nonlinear.prior_factors import prior_cost
 from egnc.robust.costs import truncated_cost
 from egnc.robust.diagnostics import solve_warnings
 from egnc.robust.gnc import GncOptions, StageReport, classify_inliers, iteration_limited
@@ -109,8 +110,14 @@ class Result:
 
     @property
     def rejected_edges(self) -> np.ndarray:
-        """0-based indices, in input-file order, of the edges rejected as outliers."""
-        return np.flatnonzero(~self.inliers)
+        """0-based factor indices (`PoseGraph.edge_factor_index`: every edge and prior line in file
+        order; the edge index when the graph has no prior) of the edges rejected as outliers."""
+        return self.graph.edge_factor_index[~self.inliers]
+
+    @property
+    def rejected_priors(self) -> np.ndarray:
+        """0-based factor indices of the priors rejected as outliers: none, priors are held as known inliers."""
+        return np.zeros(0, dtype=np.int64)
 
 
 class ResultCosts(TypedDict):
@@ -180,6 +187,8 @@ def decided_fields(
     """
     d = graph.tangent_dim
     initial_fits = classify_inliers(initial_r, robust, d, gnc_options)
+    # The priors' cost (held quadratic in this release: never rejected) is part of every cost field.
+    priors = (prior_cost(graph.priors, graph.poses), prior_cost(graph.priors, result_poses))
     warnings = solve_warnings(
         graph,
         stages,
@@ -192,9 +201,18 @@ def decided_fields(
         start=start,
         settled=settled,
         disputed=disputed,
+        prior_costs=priors,
     )
+    costs = result_costs(initial_r, r, inliers, robust, d, gnc_options.outlier_quantile)
+    if graph.num_priors:
+        costs = ResultCosts(
+            initial_cost=costs["initial_cost"] + priors[0],
+            cost=costs["cost"] + priors[1],
+            accepted_cost=costs["accepted_cost"] + priors[1],
+            truncated_cost=costs["truncated_cost"] + priors[1],
+        )
     return DecidedFields(
-        **result_costs(initial_r, r, inliers, robust, d, gnc_options.outlier_quantile),
+        **costs,
         iterations=sum(stage.iterations for stage in stages),
         warnings=warnings,
         start=start,
