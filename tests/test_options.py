@@ -115,7 +115,8 @@ def test_an_unknown_start_is_refused_listing_the_known_ones():
 
 
 def test_the_deprecated_start_flags_warn_and_switch_starts():
-    with pytest.warns(DeprecationWarning, match=r"starts=\('runs', 'chordal-all', 'regrouped', 'elimination', 'parts'\)"):
+    expected = r"starts=\('runs', 'chordal-all', 'regrouped', 'elimination', 'parts'\)"
+    with pytest.warns(DeprecationWarning, match=expected):
         without_chordal = GncOptions(chordal_start=False)
     assert without_chordal == GncOptions(starts=("runs", "chordal-all", "regrouped", "elimination", "parts"))
     with pytest.warns(DeprecationWarning, match="starts="):

@@ -7,7 +7,10 @@ row `j` of part `q`, measuring `Z = X_i^-1 X_j`, implies one rigid motion of par
     D = X_i Z X_j^-1        (part q moved by D makes the loop hold exactly)
 
 Loops that agree imply the same `D` up to noise; a group of false loops made by perceptual
-aliasing agrees with itself on another `D`. `part_groups` finds the groups by consensus: each
+aliasing agrees with itself on another `D`. The poses `X` are a decision's map (where the loops
+it accepts agree), or each part's own least-squares map (its known inliers and accepted loops,
+none between the parts), where a map bent by a mix of groups does not blur them but each part's
+drift splits a true group into pieces along it. `part_groups` finds the groups by consensus: each
 loop's `D` is tried on every loop between the two parts, the one that explains most of them
 (squared whitened residual under the outlier test's threshold) is a group, and so on for the
 rest, while a group has at least two members.
@@ -23,19 +26,22 @@ the decision made it).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from egnc.errors import SolverError
 from egnc.graph import PoseGraph
 from egnc.graph.connectivity import connected_components
+from egnc.graph.priors import Priors
 from egnc.nonlinear.factors import group_of, to_matrices
+from egnc.nonlinear.least_squares import Problem, solve_least_squares
 from egnc.robust.kernels import chi2_quantile
 
 __all__ = ["AGREEMENT_SCALE", "MAX_CANDIDATES", "MAX_GROUPS", "PartGroups", "part_group_warning", "part_groups"]
 
-MAX_GROUPS = 3
-"""Groups looked for between the two parts; a fourth would be noise more often than a rival."""
+MAX_GROUPS = 4
+"""Groups looked for between the two parts: a true group split by drift, and a rival."""
 
 AGREEMENT_SCALE = 4.0
 """A loop agrees with another's motion `D` when its `r^2` is below 4 times the outlier test's
@@ -72,14 +78,25 @@ class PartGroups:
         return self.loops[self.groups == group]
 
 
-def part_groups(graph: PoseGraph, robust: np.ndarray, poses: np.ndarray, quantile: float) -> PartGroups | None:
-    """The groups of loops between the two parts of `graph` joined by the most loops, at `poses`.
+def part_groups(
+    graph: PoseGraph,
+    robust: np.ndarray,
+    inliers: np.ndarray,
+    poses: np.ndarray,
+    quantile: float,
+    linear_solver: str | None = None,
+) -> PartGroups | None:
+    """The groups of loops between the two parts of `graph` joined by the most loops.
 
     Args:
         graph: the pose graph.
         robust: `(E,)` bool, the loop closures; the other edges are the known inliers.
-        poses: `(N, n, n)` a map whose parts are each well shaped (a decision's map).
-        quantile: the outlier test's quantile: a loop agrees with `D` when `r^2 < chi2.ppf(q, d)`.
+        inliers: `(E,)` bool, a decision's accepted edges (its loops within a part shape the part).
+        poses: `(N, n, n)` the decision's map, where each part's own map starts.
+        quantile: the outlier test's quantile: a loop agrees with `D` when `r^2` is below
+            `AGREEMENT_SCALE` times `chi2.ppf(q, d)`.
+        linear_solver: the backend of each part's own least-squares map, the `X` of the
+            groups; None: the groups are found at `poses`.
 
     Returns:
         The `PartGroups`, or None when the known inliers are connected or no two parts of at
@@ -100,10 +117,22 @@ def part_groups(graph: PoseGraph, robust: np.ndarray, poses: np.ndarray, quantil
     if counts.max() < 2:
         return None
     loops = np.flatnonzero(between & (np.sort(ends, axis=1) == (p, q)).all(axis=1))
-    T_i, Z, T_j = _oriented(graph, loops, labels == q, poses)
+    own = poses if linear_solver is None else _part_maps(graph, inliers & ~between, labels, poses, linear_solver)
+    T_i, Z, T_j = _oriented(graph, loops, labels == q, own)
     threshold = AGREEMENT_SCALE * chi2_quantile(quantile, graph.tangent_dim)
     groups, motions = _consensus(graph, loops, T_i, Z, T_j, threshold)
     return PartGroups(loops, labels == q, groups, motions)
+
+
+def _part_maps(graph: PoseGraph, keep: np.ndarray, labels: np.ndarray, poses: np.ndarray, backend: str) -> np.ndarray:
+    """`(N, n, n)` least squares of the edges `keep` (none between parts), each part held by its first row."""
+    first = np.zeros(graph.num_poses, dtype=bool)
+    first[np.unique(labels, return_index=True)[1]] = True
+    parts = replace(graph.subgraph_edges(keep), fixed=graph.fixed | first, priors=Priors.empty(graph.dim))
+    try:
+        return solve_least_squares(Problem.from_graph(parts, backend), poses).poses
+    except SolverError:  # a part the kept edges leave singular: its shape as the decision left it
+        return poses
 
 
 def _oriented(
@@ -157,7 +186,7 @@ def part_group_warning(
         poses: `(N, n, n)` the decision's map.
         quantile: the outlier test's quantile.
     """
-    found = part_groups(graph, robust, poses, quantile)
+    found = part_groups(graph, robust, inliers, poses, quantile)
     if found is None or found.count < 2:
         return None
     ids = graph.vertex_ids

@@ -241,23 +241,26 @@ class PartsStart:
 
     def propose(self, search: Search) -> Proposal:
         context, best = search.context, search.best()
-        found = part_groups(context.graph, context.robust, best.poses, context.gnc_options.outlier_quantile)
-        if found is None or found.count < 2:  # connected known inliers, or one group only: nothing to choose
-            return None, ()
+        quantile = context.gnc_options.outlier_quantile
+        tried: list[np.ndarray] = [np.flatnonzero(best.inliers & context.robust)]  # best keeps these: done
         decisions: list[Decision] = []
         reports: tuple[StageReport, ...] = ()
-        for group in range(found.count):
-            members = found.members(group)
-            if np.array_equal(np.flatnonzero(best.inliers[found.loops]), np.flatnonzero(found.groups == group)):
-                continue  # the best decision keeps this group whole and nothing else between the parts
-            poses = best.poses.copy()
-            poses[found.moved] = found.motions[group] @ poses[found.moved]
-            inliers = best.inliers.copy()
-            inliers[found.loops] = False
-            inliers[members] = True
-            decision = context.decide(poses, inliers, "parts")
-            decisions.append(decision)
-            reports += decision.reports
+        for backend in (None, context.linear_solver):  # groups at the best map, then at each part's own
+            found = part_groups(context.graph, context.robust, best.inliers, best.poses, quantile, backend)
+            if found is None or found.count < 2:  # connected known inliers, or one group only
+                continue
+            for group in range(found.count):
+                inliers = best.inliers.copy()
+                inliers[found.loops] = False
+                inliers[found.members(group)] = True
+                if any(np.array_equal(np.flatnonzero(inliers & context.robust), seen) for seen in tried):
+                    continue
+                tried.append(np.flatnonzero(inliers & context.robust))
+                poses = best.poses.copy()
+                poses[found.moved] = found.motions[group] @ poses[found.moved]
+                decision = context.decide(poses, inliers, "parts")
+                decisions.append(decision)
+                reports += decision.reports
         if not decisions:
             return None, reports
         return min(decisions, key=lambda decision: decision.truncated_cost), reports
