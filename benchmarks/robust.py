@@ -4,7 +4,8 @@
     python benchmarks/robust.py drifted [--data-dir DIR] [--files ...] [--drifted ...] [--heading 0.1,0.3]
         [--scaled 10] [--seeds 1,2] [--extra FILE.g2o,...] [--time-limit 300] [--no-gtsam]
     python benchmarks/robust.py gnc [--loss gm|tls] [--time-limit 600] [FILE ...]
-    python benchmarks/robust.py gtsam-bridge [--data-dir DIR] [--files MIT,...] [--no-files] [--no-robots]
+    python benchmarks/robust.py gtsam-bridge [--data-dir DIR] [--files MIT,...] [--percent 0,30]
+        [--no-files] [--no-robots]
 
 - `clean` (`_lib/robust_clean.py`): files without false loops, the default `egnc.solve` against
   `l2`: loops rejected, ATE to the `l2` optimum, both costs, warnings and times.
@@ -72,6 +73,7 @@ def parser() -> argparse.ArgumentParser:
     bridge = commands.add_parser("gtsam-bridge", help="egnc.from_gtsam on shared files and two robots")
     bridge.add_argument("--data-dir", type=Path, default=SHARED_DATASETS)
     bridge.add_argument("--files", default=CLEAN_FILES, help="comma-separated dataset names (default: all but cubicle)")
+    bridge.add_argument("--percent", default="0,30", help="false loops added to each file, in %% (0: as given)")
     bridge.add_argument("--no-files", action="store_true", help="only the two-robot table")
     bridge.add_argument("--no-robots", action="store_true", help="only the shared-file table")
     return top
@@ -92,7 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "gtsam-bridge":
         from _lib import gtsam_bridge
 
-        return gtsam_bridge.run(args.data_dir, args.files, not args.no_files, not args.no_robots, command_echo(given))
+        return gtsam_bridge.run(
+            args.data_dir, args.files, args.percent, not args.no_files, not args.no_robots, command_echo(given)
+        )
     from _lib import gtsam_gnc
 
     return gtsam_gnc.report_gnc(args.files, args.loss, args.time_limit, command_echo(given))

@@ -1,9 +1,10 @@
 """The GTSAM bridge on real graphs: costs, decisions and times, and two robots from GTSAM objects.
 
-`python benchmarks/robust.py gtsam-bridge [--data-dir ../shared/datasets] [--files MIT,...] [--no-files]
-[--no-robots]`
+`python benchmarks/robust.py gtsam-bridge [--data-dir ../shared/datasets] [--files MIT,...] [--percent 0,30]
+[--no-files] [--no-robots]`
 
-- Every shared file (cubicle's information is not positive definite, so it is left out) read by
+- Every shared file (cubicle's information is not positive definite, so it is left out), as given
+  and with `--percent` % false loops (riSAM's rule, seed 1, written to a g2o file), read by
   `gtsam.readG2o` and converted with `egnc.from_gtsam`: egnc's least-squares cost at the values
   against GTSAM's `graph.error(values)`, the default solve's rejected edges against those of the
   same file read by `egnc.read_g2o`, and the conversion time (both ways) against the solve time.
@@ -16,6 +17,7 @@
 
 from __future__ import annotations
 
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -23,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import egnc
+from egnc.datasets import add_false_loops
 from egnc.datasets.two_robots import GROUP_FALSE, RANDOM_FALSE, TRUE_LOOP, two_robots
 from egnc.interop.gtsam import from_gtsam, gtsam_error, inlier_factor_mask, to_gtsam, to_gtsam_values
 
@@ -42,10 +45,19 @@ ROBOT_CASES = (
 """The two-robot cases: the false inter-robot loops added to the 40 true ones."""
 
 
-def file_row(path: Path) -> str:
-    """One markdown row of the shared-file table."""
+def file_row(path: Path, percent: float) -> str:
+    """One markdown row of the shared-file table: the file, or it with `percent` % false loops (seed 1)."""
     import gtsam
 
+    label = path.stem
+    if percent:
+        graph = egnc.read_g2o(path)
+        reference = egnc.solve(graph, "l2").graph.poses
+        corrupted = add_false_loops(graph, percent, seed=1, reference_poses=reference).graph
+        folder = Path(tempfile.mkdtemp(prefix="egnc-bridge-"))
+        path = folder / path.name
+        egnc.write_g2o(corrupted, path)
+        label = f"{label} {percent:g} %"
     factors, values = gtsam.readG2o(str(path), path.stem in THREE_D)
     started = time.perf_counter()
     bridge = from_gtsam(factors, values)
@@ -59,23 +71,24 @@ def file_row(path: Path) -> str:
     from_file = egnc.solve(egnc.read_g2o(path))
     same = np.array_equal(from_file.rejected_edges, np.flatnonzero(~mask))
     return (
-        f"| {path.stem} | {factors.size()} | {gtsam_cost:.10g} | {abs(egnc_cost - gtsam_cost) / gtsam_cost:.1e} "
+        f"| {label} | {factors.size()} | {gtsam_cost:.10g} | {abs(egnc_cost - gtsam_cost) / gtsam_cost:.1e} "
         f"| {len(from_file.rejected_edges)} | {int(np.count_nonzero(~mask))} | {'yes' if same else 'NO'} "
         f"| {convert_in:.3f} | {convert_out:.3f} | {result.time_s:.2f} |"
     )
 
 
-def files_table(data_dir: Path, names: str) -> None:
+def files_table(data_dir: Path, names: str, percents: str) -> None:
     """Print the shared-file table."""
     print(
         "| file | factors | GTSAM error | relative difference of egnc's cost | rejected, g2o path "
         "| rejected, GTSAM path | same set | from_gtsam s | back to GTSAM s | solve s |"
     )
     print("|---|---:|---:|---:|---:|---:|---|---:|---:|---:|")
-    for name in names.split(","):
-        path = data_dir / f"{name}.g2o"
-        if path.is_file():
-            print(file_row(path), flush=True)
+    for percent in (float(text) for text in percents.split(",")):
+        for name in names.split(","):
+            path = data_dir / f"{name}.g2o"
+            if path.is_file():
+                print(file_row(path, percent), flush=True)
 
 
 def robots_table(data_dir: Path) -> None:
@@ -126,11 +139,11 @@ def _kept_group(rejected: dict[int, int], counts: dict[int, int]) -> str:
     return "true loops" if true_kept else "none"
 
 
-def run(data_dir: Path, files: str, with_files: bool, with_robots: bool, command: str) -> int:
+def run(data_dir: Path, files: str, percents: str, with_files: bool, with_robots: bool, command: str) -> int:
     """Print the tables; 0."""
     print(f"`{command}`\n")
     if with_files:
-        files_table(data_dir, files)
+        files_table(data_dir, files, percents)
         print()
     if with_robots:
         robots_table(data_dir)
