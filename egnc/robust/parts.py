@@ -21,7 +21,8 @@ of lowest truncated cost keeps one group whole; and `part_group_warning` says wh
 decision mixes groups, or rejects a whole group that would place the parts differently.
 
 Only the pair of parts joined by the most loops is examined (two robots; a third part is left as
-the decision made it).
+the decision made it), and only where the known inliers form at most `MAX_PARTS` parts: an
+odometry broken into many pieces (cubicle's 403) is not a map of a few robots.
 """
 
 from __future__ import annotations
@@ -38,10 +39,21 @@ from egnc.nonlinear.factors import group_of, to_matrices
 from egnc.nonlinear.least_squares import Problem, solve_least_squares
 from egnc.robust.kernels import chi2_quantile
 
-__all__ = ["AGREEMENT_SCALE", "MAX_CANDIDATES", "MAX_GROUPS", "PartGroups", "part_group_warning", "part_groups"]
+__all__ = [
+    "AGREEMENT_SCALE",
+    "MAX_CANDIDATES",
+    "MAX_PARTS",
+    "MAX_GROUPS",
+    "PartGroups",
+    "part_group_warning",
+    "part_groups",
+]
 
 MAX_GROUPS = 4
 """Groups looked for between the two parts: a true group split by drift, and a rival."""
+
+MAX_PARTS = 8
+"""Most parts of the known inliers for the groups to be looked for (a few robots)."""
 
 AGREEMENT_SCALE = 4.0
 """A loop agrees with another's motion `D` when its `r^2` is below 4 times the outlier test's
@@ -99,12 +111,12 @@ def part_groups(
             groups; None: the groups are found at `poses`.
 
     Returns:
-        The `PartGroups`, or None when the known inliers are connected or no two parts of at
-        least two poses each are joined by two loops.
+        The `PartGroups`, or None when the known inliers are connected or form more than
+        `MAX_PARTS` parts, or no two parts of at least two poses each are joined by two loops.
     """
     known = ~robust
     count, labels = connected_components(graph.num_poses, graph.edges[known])
-    if count < 2:
+    if not 2 <= count <= MAX_PARTS:
         return None
     sizes = np.bincount(labels[graph.edges[known, 0]], minlength=count)
     ends = labels[graph.edges]
