@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import re
 import tempfile
 import time
 import warnings
@@ -117,7 +118,7 @@ def robots_table(data_dir: Path) -> None:
         counts = {kind: int(np.count_nonzero(kinds == kind)) for kind in (TRUE_LOOP, RANDOM_FALSE, GROUP_FALSE)}
         b_rows = np.arange(graph.num_poses) >= graph.num_poses // 2
         placed = np.median(np.linalg.norm(result.graph.poses[b_rows, :2] - reference[b_rows, :2], axis=1))
-        group_warning = [text for text in result.warnings if "groups that disagree" in text]
+        group_warning = [_short(text) for text in result.warnings if "groups that disagree" in text]
         print(
             f"| {label} | {counts[TRUE_LOOP]} + {counts[RANDOM_FALSE] + counts[GROUP_FALSE]} "
             f"| {rejected[TRUE_LOOP]} of {counts[TRUE_LOOP]} "
@@ -126,6 +127,15 @@ def robots_table(data_dir: Path) -> None:
             f"| {group_warning[0] if group_warning else '-'} | {convert:.3f} | {result.time_s:.2f} |",
             flush=True,
         )
+
+
+def _short(warning: str) -> str:
+    """The gist of the groups warning: what was kept and the rejected group, or the mix."""
+    rival = re.search(r"(a group of \d+ was kept|none was kept), a rejected group of (\d+)", warning)
+    if rival:
+        return f"yes: {rival.group(1)}, a rejected group of {rival.group(2)}"
+    mixed = re.search(r"\(([^)]*)\): check them", warning)
+    return f"yes, mixed: {mixed.group(1)}" if mixed else "yes"
 
 
 def _kept_group(rejected: dict[int, int], counts: dict[int, int]) -> str:
