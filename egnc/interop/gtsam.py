@@ -43,7 +43,15 @@ from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.nonlinear.prior_factors import prior_cost
 from egnc.robust.result import Result
 
-__all__ = ["GtsamGraph", "from_gtsam", "gtsam_error", "inlier_factor_mask", "to_gtsam", "to_gtsam_values"]
+__all__ = [
+    "GtsamGraph",
+    "from_gtsam",
+    "gtsam_error",
+    "inlier_factor_mask",
+    "to_gtsam",
+    "to_gtsam_values",
+    "values_to_poses",
+]
 
 _BETWEEN = {"BetweenFactorPose2": 2, "BetweenFactorPose3": 3}
 _PRIOR = {"PriorFactorPose2": 2, "PriorFactorPose3": 3}
@@ -108,7 +116,7 @@ def from_gtsam(graph: typing.Any, values: typing.Any) -> GtsamGraph:
     """
     started = time.perf_counter()
     factors = _read_factors(graph)
-    keys, poses = _read_values(values, factors.dim)
+    keys, poses = values_to_poses(values, factors.dim)
     order = np.argsort(keys.view(np.int64), kind="stable")  # egnc's ids sort as int64
     keys, poses = keys[order], poses[order]
     ids = keys.view(np.int64)
@@ -230,8 +238,13 @@ def _pose_matrix(pose: typing.Any, dim: int) -> np.ndarray:
     return np.asarray(pose.matrix(), dtype=np.float64)
 
 
-def _read_values(values: typing.Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
-    """`(keys (N,) uint64, poses (N, P))` of `Values` that hold only poses of dimension `dim`."""
+def values_to_poses(values: typing.Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """`(keys (N,) uint64, poses (N, P))` of `gtsam.Values` that hold only poses of dimension `dim`,
+    in GTSAM's key order (unsigned), poses in egnc's parametrization.
+
+    Raises:
+        GraphError: a value is not a `Pose2` (dim 2) or `Pose3` (dim 3).
+    """
     import gtsam
 
     keys = np.array(list(values.keys()), dtype=np.uint64)
