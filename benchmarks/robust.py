@@ -4,6 +4,8 @@
     python benchmarks/robust.py drifted [--data-dir DIR] [--files ...] [--drifted ...] [--heading 0.1,0.3]
         [--scaled 10] [--seeds 1,2] [--extra FILE.g2o,...] [--time-limit 300] [--no-gtsam]
     python benchmarks/robust.py gnc [--loss gm|tls] [--time-limit 600] [FILE ...]
+    python benchmarks/robust.py gtsam-bridge [--data-dir DIR] [--files MIT,...] [--percent 0,30]
+        [--no-files] [--no-robots]
 
 - `clean` (`_lib/robust_clean.py`): files without false loops, the default `egnc.solve` against
   `l2`: loops rejected, ATE to the `l2` optimum, both costs, warnings and times.
@@ -12,6 +14,9 @@
   LM, each a child process under a time limit: loops rejected and cost over the optimum.
 - `gnc` (`_lib/gtsam_gnc.py`): GTSAM's `GncLMOptimizer` on g2o files, each in a child killed at the
   limit: status, final error, loops with weight < 0.5.
+- `gtsam-bridge` (`_lib/gtsam_bridge.py`): `egnc.from_gtsam` on every shared file (cost equal to
+  GTSAM's, rejected sets equal to the g2o path's, conversion time against the solve) and two
+  robots from GTSAM objects (M3500 cut in two, random and consistent false inter-robot loops).
 
 The corrupted grid (false loop closures, precision and recall, riSAM and GTSAM side by side) is
 `egnc-bench`; the time robustness costs is `robust_speed.py`.
@@ -64,6 +69,13 @@ def parser() -> argparse.ArgumentParser:
     gnc.add_argument("files", nargs="*", help="g2o files or dataset names (default: the reference datasets)")
     gnc.add_argument("--loss", choices=("gm", "tls"), default="tls", help="GNC-GM or GNC-TLS (default tls)")
     gnc.add_argument("--time-limit", type=float, default=600.0, help="seconds per file")
+
+    bridge = commands.add_parser("gtsam-bridge", help="egnc.from_gtsam on shared files and two robots")
+    bridge.add_argument("--data-dir", type=Path, default=SHARED_DATASETS)
+    bridge.add_argument("--files", default=CLEAN_FILES, help="comma-separated dataset names (default: all but cubicle)")
+    bridge.add_argument("--percent", default="0,30", help="false loops added to each file, in %% (0: as given)")
+    bridge.add_argument("--no-files", action="store_true", help="only the two-robot table")
+    bridge.add_argument("--no-robots", action="store_true", help="only the shared-file table")
     return top
 
 
@@ -79,6 +91,12 @@ def main(argv: list[str] | None = None) -> int:
         from _lib import robust_drifted
 
         return robust_drifted.run(args)
+    if args.command == "gtsam-bridge":
+        from _lib import gtsam_bridge
+
+        return gtsam_bridge.run(
+            args.data_dir, args.files, args.percent, not args.no_files, not args.no_robots, command_echo(given)
+        )
     from _lib import gtsam_gnc
 
     return gtsam_gnc.report_gnc(args.files, args.loss, args.time_limit, command_echo(given))

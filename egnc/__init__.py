@@ -1,7 +1,8 @@
 """egnc: robust pose-graph optimization with Efficient Graduated Non-Convexity.
 
 Public API: `solve` a pose graph (or a g2o file) into a `Result`; `read_g2o` / `write_g2o`;
-`SolverOptions` and `GncOptions`; the `PoseGraph` container; the `EgncError` hierarchy.
+`SolverOptions` and `GncOptions`; the `PoseGraph` container; the `EgncError` hierarchy;
+`from_gtsam`, a GTSAM factor graph and its values as a `PoseGraph` (the optional `gtsam` extra).
 
 The names are loaded on first use (PEP 562 module `__getattr__`), so `import egnc` itself
 imports neither NumPy nor SciPy: the console scripts (`egnc.cli.launch`) can then catch a Ctrl-C
@@ -27,6 +28,7 @@ if _typing.TYPE_CHECKING:
     from egnc.api import Result, StageReport, marginal_covariances, solve
     from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError, NumericalError, SolverError
     from egnc.graph import PoseGraph
+    from egnc.interop.gtsam import from_gtsam
     from egnc.io import read_g2o, write_g2o
     from egnc.nonlinear.least_squares import SolverOptions
     from egnc.robust.gnc import GncOptions
@@ -43,6 +45,7 @@ _HOMES = {
     "SolverError": "egnc.errors",
     "SolverOptions": "egnc.nonlinear.least_squares",
     "StageReport": "egnc.api",
+    "from_gtsam": "egnc.interop.gtsam",
     "marginal_covariances": "egnc.api",
     "read_g2o": "egnc.io",
     "solve": "egnc.api",
@@ -63,6 +66,7 @@ __all__ = [
     "SolverOptions",
     "StageReport",
     "__version__",
+    "from_gtsam",
     "marginal_covariances",
     "read_g2o",
     "solve",

@@ -51,3 +51,12 @@ class EgncWarning(UserWarning):
     Raised with `warnings.warn`, so library code never prints; `egnc-solve` shows each one as a
     `warning: ...` line on stderr and lists them in its JSON report.
     """
+
+
+class UnsupportedFactorError(EgncError):
+    """A factor of another library's graph has no counterpart in egnc: names its index and type."""
+
+    def __init__(self, index: int, type_name: str, reason: str):
+        self.index = index
+        self.type_name = type_name
+        super().__init__(f"factor {index} ({type_name}): {reason}")

@@ -23,6 +23,7 @@ LAYERS = (
     ("metrics",),
     ("robust",),
     ("api",),
+    ("interop",),
     ("online",),
     ("plot", "datasets"),
     ("bench",),

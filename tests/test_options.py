@@ -110,21 +110,23 @@ def test_a_bad_deprecated_start_flag_is_refused_naming_it(name, value):
 def test_an_unknown_start_is_refused_listing_the_known_ones():
     with pytest.raises(OptionError, match="unknown start 'nearest'") as refused:
         GncOptions(starts=("chordal", "nearest"))
-    for name in ("runs", "chordal", "chordal-all", "regrouped", "elimination"):
+    for name in ("runs", "chordal", "chordal-all", "regrouped", "elimination", "parts"):
         assert repr(name) in str(refused.value)
 
 
 def test_the_deprecated_start_flags_warn_and_switch_starts():
-    with pytest.warns(DeprecationWarning, match=r"starts=\('runs', 'chordal-all', 'regrouped', 'elimination'\)"):
+    expected = r"starts=\('runs', 'chordal-all', 'regrouped', 'elimination', 'parts'\)"
+    with pytest.warns(DeprecationWarning, match=expected):
         without_chordal = GncOptions(chordal_start=False)
-    assert without_chordal == GncOptions(starts=("runs", "chordal-all", "regrouped", "elimination"))
+    assert without_chordal == GncOptions(starts=("runs", "chordal-all", "regrouped", "elimination", "parts"))
     with pytest.warns(DeprecationWarning, match="starts="):
         all_off = GncOptions(
             runs_start=False, chordal_start=False, chordal_all_start=False, regroup_start=False, elimination_start=False
         )
-    assert all_off.starts == ()
+    assert all_off.starts == ("parts",)  # the flags predate the parts start: it has none
     with pytest.warns(DeprecationWarning):
-        assert dataclasses.replace(all_off, runs_start=True, elimination_start=True).starts == ("runs", "elimination")
+        switched = dataclasses.replace(all_off, runs_start=True, elimination_start=True)
+    assert switched.starts == ("runs", "parts", "elimination")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # replacing another field keeps the starts, silently
         assert dataclasses.replace(without_chordal, c=2.0).starts == without_chordal.starts

@@ -20,8 +20,8 @@ import numpy as np
 
 from egnc.errors import EgncError
 from egnc.graph import PoseGraph
+from egnc.interop.gtsam import values_to_poses
 from egnc.io import write_g2o
-from egnc.nonlinear.factors import from_matrices
 
 __all__ = ["GTSAM_PRIOR_SIGMA", "add_gtsam_reference_prior", "gtsam_available", "gtsam_solve"]
 
@@ -77,16 +77,7 @@ def gtsam_solve(graph: PoseGraph, known_inliers: np.ndarray, method: str) -> tup
     values = optimizer.optimize()
     time_s = time.perf_counter() - started
     iterations = optimizer.iterations() if method == "gtsam-lm" else -1
-    keys = np.array(sorted(values.keys()), dtype=np.int64)
-    if not np.array_equal(keys, graph.vertex_ids):
+    keys, poses = values_to_poses(values, graph.dim)
+    if not np.array_equal(keys.view(np.int64), graph.vertex_ids):
         raise EgncError("GTSAM's result does not hold the graph's poses")
-    if is_3d:
-        flat = gtsam.utilities.extractPose3(values)  # rows: R (row-major), then t
-        T = np.zeros((len(flat), 4, 4))
-        T[:, :3, :3] = flat[:, :9].reshape(-1, 3, 3)
-        T[:, :3, 3] = flat[:, 9:]
-        T[:, 3, 3] = 1.0
-        poses = from_matrices(3, T)
-    else:
-        poses = np.asarray(gtsam.utilities.extractPose2(values), dtype=np.float64)
     return poses, time_s, int(iterations)

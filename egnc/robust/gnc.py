@@ -40,10 +40,10 @@ from egnc.nonlinear.least_squares import (
 from egnc.robust.losses import FixedWeightLoss, KernelLoss
 from egnc.robust.schedules import FIXED_LAST_STAGE_METHODS, Schedule, Stage, ThresholdConvention, exceeds
 
-StartName = Literal["runs", "chordal", "chordal-all", "regrouped", "elimination"]
+StartName = Literal["runs", "chordal", "chordal-all", "regrouped", "elimination", "parts"]
 """A start of the outlier decision other than the initial guess (`egnc.robust.pipeline`)."""
 
-START_NAMES: tuple[StartName, ...] = ("runs", "chordal", "chordal-all", "regrouped", "elimination")
+START_NAMES: tuple[StartName, ...] = ("runs", "chordal", "chordal-all", "regrouped", "elimination", "parts")
 """Every start `GncOptions.starts` accepts, in the default order (`egnc.robust.pipeline.STARTS`)."""
 
 DEPRECATED_START_FLAGS: dict[str, StartName] = {
@@ -118,8 +118,9 @@ class GncOptions:
             fits better than the guess; `"chordal"` decides from the chordal initialization of the
             trusted edges; `"chordal-all"` runs the GNC stage again from the chordal
             initialization of every edge; `"regrouped"` puts rejected runs of loops back together;
-            `"elimination"` eliminates loops backwards from least squares over every edge.
-            `()` decides from the initial guess alone.
+            `"elimination"` eliminates loops backwards from least squares over every edge;
+            `"parts"`, where the known inliers fall into parts (two robots), decides from each
+            group of agreeing loops between them (`egnc.robust.parts`). `()` decides from the initial guess alone.
         every_stage: solve every stage of the schedule even when, under restarts, only the last
             one decides the result: to watch the graduation stage by stage (same result, more time).
         stage_rel_cost_tol: graduated methods with `refine`: each GNC stage stops when its
@@ -252,7 +253,7 @@ def stage_tolerance(method: str, options: GncOptions) -> float:
 
 
 StageKind = Literal["gnc", "decision", "probe", "elimination"]
-StageStart = Literal["guess", "runs", "chordal", "chordal-all", "regrouped", "elimination", "online"]
+StageStart = Literal["guess", "runs", "chordal", "chordal-all", "regrouped", "elimination", "parts", "online"]
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,6 +26,8 @@ where it does not apply) and the reports of the solves it ran. `STARTS` holds th
 - `"regrouped"` (`egnc.robust.regroup.regrouped_decision`): rejected runs of loops put back.
 - `"elimination"` (`egnc.robust.elimination.elimination_decision`): backward elimination from
   least squares over every edge.
+- `"parts"` (`egnc.robust.parts`): where the known inliers fall into parts (two robots), one
+  decision per group of agreeing loops between them, that group alone accepted between the parts.
 
 Each start after the guess tries to beat the best decision so far (`Search.best`); a decision
 replaces the kept one only when lower by more than rounding
@@ -46,6 +48,7 @@ from egnc.robust.costs import lower_by_more_than_rounding
 from egnc.robust.decision import Decision, StartContext
 from egnc.robust.elimination import elimination_decision
 from egnc.robust.gnc import START_NAMES, GncOutcome, StageReport, StageStart, classify_inliers
+from egnc.robust.parts import part_groups
 from egnc.robust.regroup import RunsStart, regrouped_decision, runs_start
 from egnc.robust.starts import all_edges_decision, chordal_decision
 
@@ -230,12 +233,52 @@ class EliminationStart:
         return elimination_decision(search.context, search.best())
 
 
+class PartsStart:
+    """One decision per group of agreeing loops between two otherwise separate parts (`egnc.robust.parts`)."""
+
+    name: ClassVar[str] = "parts"
+    description: ClassVar[str] = "group of agreeing loop closures between two separate parts"
+
+    def propose(self, search: Search) -> Proposal:
+        context, best = search.context, search.best()
+        quantile = context.gnc_options.outlier_quantile
+        tried: list[np.ndarray] = [np.flatnonzero(best.inliers & context.robust)]  # best keeps these: done
+        decisions: list[Decision] = []
+        reports: tuple[StageReport, ...] = ()
+        for backend in (None, context.linear_solver):  # groups at the best map, then at each part's own
+            found = part_groups(context.graph, context.robust, best.inliers, best.poses, quantile, backend)
+            if found is None or found.count < 2:  # connected known inliers, or one group only
+                continue
+            for group in range(found.count):
+                inliers = best.inliers.copy()
+                inliers[found.loops] = False
+                inliers[found.members(group)] = True
+                if any(np.array_equal(np.flatnonzero(inliers & context.robust), seen) for seen in tried):
+                    continue
+                tried.append(np.flatnonzero(inliers & context.robust))
+                poses = best.poses.copy()
+                poses[found.moved] = found.motions[group] @ poses[found.moved]
+                decision = context.decide(poses, inliers, "parts")
+                decisions.append(decision)
+                reports += decision.reports
+        if not decisions:
+            return None, reports
+        return min(decisions, key=lambda decision: decision.truncated_cost), reports
+
+
 GUESS = GuessStart()
 """The start that always runs: the GNC stage from the initial guess."""
 
 STARTS: dict[str, Start] = {
     start.name: start
-    for start in (LoopRunsStart(), ChordalStart(), ChordalAllStart(), RegroupedStart(), EliminationStart())
+    for start in (
+        LoopRunsStart(),
+        ChordalStart(),
+        ChordalAllStart(),
+        RegroupedStart(),
+        EliminationStart(),
+        PartsStart(),
+    )
 }
 """The starts `GncOptions.starts` chooses from, by name (`egnc.robust.gnc.START_NAMES`)."""
 assert tuple(STARTS) == START_NAMES

@@ -15,6 +15,7 @@ from egnc.nonlinear.prior_factors import prior_cost
 from egnc.robust.costs import truncated_cost
 from egnc.robust.diagnostics import solve_warnings
 from egnc.robust.gnc import GncOptions, StageReport, classify_inliers, iteration_limited
+from egnc.robust.parts import part_group_warning
 
 __all__ = ["DecidedFields", "Result", "ResultCosts", "decided_fields", "nothing_to_optimize", "result_costs"]
 
@@ -203,7 +204,10 @@ def decided_fields(
         disputed=disputed,
         prior_costs=priors,
     )
-    costs = result_costs(initial_r, r, inliers, robust, d, gnc_options.outlier_quantile)
+    quantile = gnc_options.outlier_quantile
+    parts = part_group_warning(graph, robust, inliers, to_matrices(graph.dim, result_poses), quantile)
+    warnings += () if parts is None else (parts,)
+    costs = result_costs(initial_r, r, inliers, robust, d, quantile)
     if graph.num_priors:
         costs = ResultCosts(
             initial_cost=costs["initial_cost"] + priors[0],

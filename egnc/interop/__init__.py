@@ -1,0 +1,1 @@
+"""Bridges to other libraries' pose graphs (GTSAM); each imports its library only when called."""
