@@ -24,7 +24,7 @@ LAYERS = (
     ("robust",),
     ("api",),
     ("online",),
-    ("plot", "datasets"),
+    ("plot", "rerun", "datasets"),
     ("bench",),
     ("cli",),
     ("__init__", "__main__"),
