@@ -97,10 +97,11 @@ def recording(path: str | Path | None = None, connect: str | None = None) -> Ite
         path: the `.rrd` file; written to a temporary beside it and renamed over it when the block
             succeeds (inside `egnc.io.atomic.all_or_nothing`, when that block does), removed if it fails.
         connect: the URL of a running viewer (`DEFAULT_VIEWER_URL` for one started with `rerun`);
-            the connection does not block, and a missing viewer drops the data, not the solve.
+            connecting does not block the block, only its end, which waits for the data to be sent.
 
     Raises:
-        EgncError: the Rerun SDK is not installed, neither output is given, or `path` cannot be written.
+        EgncError: the Rerun SDK is not installed, neither output is given, `path` cannot be
+            written, or no viewer answered at `connect` when the block ended (`path` is then not written).
     """
     rr = require_rerun()
     if path is None and connect is None:
@@ -115,8 +116,14 @@ def recording(path: str | Path | None = None, connect: str | None = None) -> Ite
         try:
             yield stream
         finally:
-            stream.flush()
-            stream.disconnect()  # closes the file before it is renamed
+            try:
+                stream.flush()
+            except RuntimeError as error:  # the SDK's only failure here: no viewer at `connect`
+                raise EgncError(
+                    f"{connect}: no Rerun viewer reachable there ({error}); start one with `rerun`"
+                ) from None
+            finally:
+                stream.disconnect()  # closes the file before it is renamed
 
 
 def _positions(poses: np.ndarray) -> np.ndarray:
