@@ -13,10 +13,11 @@ timelines, written to an `.rrd` file or streamed to a running viewer, also insid
 - `StageRecorder`: `egnc.solve`'s `on_stage` callback that adds `stages/trajectory`, the poses at
   the end of each stage (`StageReport.poses`), on the same timeline.
 - `OnlineRecorder`: `OnlineSolver`'s `on_update` hook; every update on the `update` timeline
-  (`UpdateReport.step`): `online/map` (the whole trajectory, logged when an update moved it) and
-  `online/head` (the poses added since: an update that only extends the map moves no older pose),
-  `online/loops/accepted` and `online/loops/rejected` (the decision of `OnlineSolver.inliers`,
-  when the map moved), `online/latency_ms`, `online/loop_counts` (accepted, rejected),
+  (`UpdateReport.step`): `online/map/<k>` (the trajectory in strips of `BLOCK` poses, each
+  logged again when its poses moved: the last one as poses arrive, the few a loop update's
+  region moved), `online/loops/<k>` (the loop closures in batches of `BLOCK` arrows, green when
+  accepted and red when rejected by `OnlineSolver.inliers`, logged again when they moved or
+  changed sides), `online/latency_ms`, `online/loop_counts` (accepted, rejected),
   `online/new_loops/mu` (each new loop's `mu` per stage, on the `stage` timeline too) and
   `online/log` (one line per update that brought loop closures).
 - `recording(path, connect)`: a recording that writes `path` atomically (the file is complete or
@@ -134,11 +135,10 @@ def _positions(poses: np.ndarray) -> np.ndarray:
     return poses[:, : 2 if poses.shape[1] == 3 else 3]
 
 
-def _strips(rr: Any, strips: list[np.ndarray] | np.ndarray, colors: Any, radius: float | None = None) -> Any:
-    """`LineStrips2D` or `LineStrips3D` by the points' dimension (2D when there are none)."""
-    dim = np.shape(strips[0])[-1] if len(strips) else 2
-    archetype = rr.LineStrips3D if dim == 3 else rr.LineStrips2D
-    return archetype(strips, colors=colors, radii=None if radius is None else -radius)  # negative: UI points
+def _strips(rr: Any, strips: list[np.ndarray], colors: Any) -> Any:
+    """`LineStrips2D` or `LineStrips3D` by the points' dimension."""
+    archetype = rr.LineStrips3D if np.shape(strips[0])[-1] == 3 else rr.LineStrips2D
+    return archetype(strips, colors=colors)
 
 
 def _arrows(rr: Any, positions: np.ndarray, rows: np.ndarray, colors: Any) -> Any:
