@@ -54,8 +54,8 @@ LONG_TIER_MODULES = frozenset(
 LONG_TIER_FIXTURES = frozenset({"shared_datasets", "dataset_path"})
 """A test that reads the real datasets is in the long tier."""
 
-LONG_TIER_WORDS = ("gtsam", "cholmod", "rslab")
-"""A test whose id names a cross-check with GTSAM or an optional backend is in the long tier
+LONG_TIER_WORDS = ("gtsam", "cholmod", "rslab", "rerun")
+"""A test whose id names a cross-check with GTSAM, an optional backend or Rerun recordings is in the long tier
 (but for the layout checks, whose ids are module names such as `bench.gtsam`)."""
 
 

@@ -25,7 +25,7 @@ LAYERS = (
     ("api",),
     ("interop",),
     ("online",),
-    ("plot", "datasets"),
+    ("plot", "rerun", "datasets"),
     ("bench",),
     ("cli",),
     ("__init__", "__main__"),

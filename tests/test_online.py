@@ -904,3 +904,16 @@ def test_a_pose_added_without_a_value_is_placed_along_a_loop_when_no_odometry_re
     np.testing.assert_allclose(poses[100], poses[3] + [0.5, 0.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(poses[101], poses[3] + [1.5, 0.0, 0.0], atol=1e-12)
     assert solver.is_loop_closure.sum() == 1
+
+
+def test_on_update_sees_every_update_and_changes_nothing():
+    graph = egnc.read_g2o(DATA / "grid2d_outliers.g2o").first_poses(60)
+    seen = []
+    watched = replay(graph, on_update=lambda solver, report: seen.append((solver.num_poses, report.step)))
+    plain = replay(graph)
+    assert [step for _, step in seen] == list(range(1, plain.steps + 1))
+    assert seen[-1][0] == 60
+    np.testing.assert_array_equal(watched.result.graph.poses, plain.result.graph.poses)
+    np.testing.assert_array_equal(watched.solver.positions, plain.solver.poses[:, :2])
+    with pytest.raises(OptionError, match="on_update"):
+        OnlineSolver(2, on_update=3)

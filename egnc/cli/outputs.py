@@ -38,6 +38,8 @@ class OutputPlan:
         trajectory_format: `"tum"`, `"kitti"`, or None to take it from the suffix.
         edges: `--edges`, the per-edge CSV.
         drop_outliers: write the graph without the rejected loop closures.
+        rerun: `--rerun`, the Rerun recording: checked here, written by the recording itself
+            (`egnc.rerun.recording`), after the other outputs.
     """
 
     graph: Path | None = None
@@ -49,6 +51,7 @@ class OutputPlan:
     trajectory_format: TrajectoryFormat | None = None
     edges: Path | None = None
     drop_outliers: bool = False
+    rerun: Path | None = None
 
     def paths(self) -> list[tuple[str, Path]]:
         """`(option, path)` of each output asked for."""
@@ -58,6 +61,7 @@ class OutputPlan:
             ("--plot", self.plot),
             ("--trajectory", self.trajectory),
             ("--edges", self.edges),
+            ("--rerun", self.rerun),
         ]
         return [(option, path) for option, path in named if path is not None]
 
@@ -123,4 +127,3 @@ def _same_file(a: Path, b: Path) -> bool:
     if a.exists() and b.exists():
         return os.path.samefile(a, b)
     return a.resolve() == b.resolve()
-

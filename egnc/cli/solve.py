@@ -15,6 +15,7 @@ output); 130 / 143 interrupted by SIGINT / SIGTERM (one line, no output).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import sys
 import warnings
@@ -42,6 +43,7 @@ from egnc.linalg.step_solver import LINEAR_METHODS
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.online import ONLINE_METHODS, OnlineOptions
 from egnc.online.replay import CHECKPOINT_EVERY, ReplayOutcome, replay, replay_steps
+from egnc.rerun import DEFAULT_VIEWER_URL, OnlineRecorder, StageRecorder, log_result, recording
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in docs/cli.md)."""
@@ -70,6 +72,7 @@ EXAMPLES = """examples:
   egnc-solve graph.g2o --method l2 --linear-solver scipy
   egnc-solve graph.g2o --plot trajectory.png
   egnc-solve graph.g2o --trajectory solved.tum --edges edges.csv
+  egnc-solve manhattan_noisy.irl --online --rerun run.rrd
   egnc-solve cubicle.g2o --information nearest-pd --known-inliers odometry
 
 exit codes: 0 success; 1 error in the input, the solve or an output (one line on stderr, no
@@ -222,6 +225,21 @@ def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
         "--dpi", type=positive_float, default=100.0, help="resolution of the --plot image, dots per inch (default 100)"
     )
     parser.add_argument(
+        "--rerun",
+        type=Path,
+        metavar="RRD",
+        help="record the solve for the Rerun viewer here: the initial guess, each stage's poses, loop closures"
+        " coloured by IRLS weight (rejected ones red), residuals; with --online every update on a timeline"
+        " (needs egnc[rerun]; written last, after the other outputs)",
+    )
+    parser.add_argument(
+        "--rerun-connect",
+        nargs="?",
+        const=DEFAULT_VIEWER_URL,
+        metavar="URL",
+        help=f"stream the same recording to a running Rerun viewer (default {DEFAULT_VIEWER_URL})",
+    )
+    parser.add_argument(
         "--trajectory", type=Path, metavar="FILE", help="write the optimized poses here, TUM (.tum) or KITTI (.kitti)"
     )
     parser.add_argument(
@@ -261,10 +279,11 @@ def _main(argv: list[str] | None) -> int:
         trajectory_format=args.trajectory_format,
         edges=args.edges,
         drop_outliers=args.drop_outliers,
+        rerun=args.rerun,
     )
     try:
-        with sigterm_raises():
-            result, written, online = _run(args, plan)
+        with sigterm_raises(), _recording(args) as stream:
+            result, written, online = _run(args, plan, stream)
     except NumericalError as error:
         print(f"egnc-solve: numerical failure: {error}", file=sys.stderr)
         return EXIT_NUMERICAL_FAILURE
@@ -287,8 +306,16 @@ def _main(argv: list[str] | None) -> int:
     return 0
 
 
-def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path], dict | None]:
-    """Check the outputs, read, solve, write: the work of `main` between its error handlers."""
+def _recording(args: argparse.Namespace) -> contextlib.AbstractContextManager:
+    """The Rerun recording of `--rerun` and `--rerun-connect` (`egnc.rerun.recording`), or none (None)."""
+    if args.rerun is None and args.rerun_connect is None:
+        return contextlib.nullcontext()
+    return recording(args.rerun, args.rerun_connect)
+
+
+def _run(args: argparse.Namespace, plan: OutputPlan, stream=None) -> tuple[Result, list[Path], dict | None]:
+    """Check the outputs, read, solve, write: the work of `main` between its error handlers; `stream`
+    is the Rerun recording to log the solve to (None: none)."""
     _check_options(args)
     plan.check(args.input)  # before a long read and solve, not after them
     if args.checkpoint is not None and any(_same_path(args.checkpoint, path) for _, path in plan.paths()):
@@ -304,7 +331,7 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
         read_count = len(caught)
         resumed = args.checkpoint if args.checkpoint is not None and args.checkpoint.exists() else None
         try:
-            result, outcome = _solve(args, graph, known_inliers)
+            result, outcome = _solve(args, graph, known_inliers, stream)
         except EgncError as error:
             # a replay numbers the edges in the order it adds them (`replay_steps`), a batch solve in file order
             order = np.concatenate(replay_steps(graph, _mask(known_inliers, graph))) if args.online else None
@@ -318,12 +345,14 @@ def _run(args: argparse.Namespace, plan: OutputPlan) -> tuple[Result, list[Path]
 
 
 def _solve(
-    args: argparse.Namespace, graph: PoseGraph, known_inliers: str | np.ndarray
+    args: argparse.Namespace, graph: PoseGraph, known_inliers: str | np.ndarray, stream=None
 ) -> tuple[Result, ReplayOutcome | None]:
-    """Solve `graph` in one batch, or replay it with `--online`: the result, and the replay's outcome."""
+    """Solve `graph` in one batch, or replay it with `--online`: the result, and the replay's outcome;
+    recorded to the Rerun recording `stream` unless None."""
     options = SolverOptions(method=args.solver, max_iterations=args.max_iters, linear_method=args.linear_method)
     if not args.online:
         progress = None if args.quiet else Progress(sys.stderr)
+        on_stage = None if progress is None else progress.on_stage
         result = solve(
             graph,
             args.method,
@@ -331,15 +360,18 @@ def _solve(
             init=args.init,
             linear_solver=args.linear_solver,
             options=options,
-            on_stage=None if progress is None else progress.on_stage,
+            on_stage=on_stage if stream is None else StageRecorder(stream, then=on_stage),
             on_iteration=None if progress is None else progress.on_iteration,
         )
+        if stream is not None:
+            log_result(result, stream, initial=graph)
         return result, None
     online_options = OnlineOptions(decide_at_arrival=args.decide_at_arrival)
     if args.region_hops is not None:
         online_options = replace(online_options, region_hops=args.region_hops or None)
     if args.boundary_share is not None:
         online_options = replace(online_options, boundary_share=args.boundary_share)
+    recorder = None if stream is None else OnlineRecorder(stream)
     outcome = replay(
         graph,
         args.method,
@@ -350,7 +382,11 @@ def _solve(
         checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY,
         online_options=online_options,
         on_step=None if args.quiet else StepProgress(sys.stderr).on_step,
+        on_update=recorder,
     )
+    if recorder is not None:
+        recorder.flush()
+        log_result(outcome.result, recorder.recording, initial=graph)
     return outcome.result, outcome
 
 

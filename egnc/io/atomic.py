@@ -41,6 +41,23 @@ def atomic_binary_file(path: Path) -> contextlib.AbstractContextManager[BinaryIO
 
 
 @contextlib.contextmanager
+def atomic_path(path: Path) -> Iterator[Path]:
+    """Yield the path of a new empty temporary beside `path`, for a writer that opens files itself
+    (Rerun's file sink); it replaces `path` only if the block succeeds (deferred inside `all_or_nothing`).
+
+    The writer must have closed the temporary when the block ends; it is then flushed to disk and renamed.
+
+    Raises:
+        EgncError: the temporary cannot be created, or cannot be flushed when the block ends.
+    """
+    with _temporary(path) as (temporary, descriptor):
+        os.close(descriptor)
+        yield temporary
+        with open(temporary, "rb") as written:
+            os.fsync(written.fileno())
+
+
+@contextlib.contextmanager
 def all_or_nothing() -> Iterator[None]:
     """Defer the renames of every atomic file written in the block until the block succeeds.
 
@@ -144,7 +161,18 @@ def _replace(temporary: Path, path: Path) -> None:
 
 @contextlib.contextmanager
 def _atomic_file(path: Path, mode: str, encoding: str | None = None, newline: str | None = None) -> Iterator:
-    """The one implementation: temporary file beside `path`, fsync, then `os.replace` (now or deferred)."""
+    """The file objects' implementation: a temporary file beside `path` (`_temporary`), fsync, then rename."""
+    with _temporary(path) as (_, descriptor):
+        with os.fdopen(descriptor, mode, encoding=encoding, newline=newline) as out:
+            yield out
+            out.flush()
+            os.fsync(out.fileno())
+
+
+@contextlib.contextmanager
+def _temporary(path: Path) -> Iterator[tuple[Path, int]]:
+    """The one implementation: a new temporary beside `path` and its open descriptor (opened for
+    writing), then `os.replace` over `path` (now or deferred) if the block succeeds, else removed."""
     remove_stale_temporaries(path)
     temporary = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
@@ -153,10 +181,7 @@ def _atomic_file(path: Path, mode: str, encoding: str | None = None, newline: st
     except OSError as error:
         raise EgncError(f"{path}: cannot write file: {error.strerror or error}") from None
     try:
-        with os.fdopen(descriptor, mode, encoding=encoding, newline=newline) as out:
-            yield out
-            out.flush()
-            os.fsync(out.fileno())
+        yield temporary, descriptor
         renames = _pending.get()
         if renames is None:
             _replace(temporary, path)

@@ -45,6 +45,7 @@ from egnc.graph.checks import check_callable, check_instance, check_int
 from egnc.io.atomic import check_writable
 from egnc.nonlinear.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
+from egnc.online.solver import UpdateCallback
 from egnc.robust.gnc import GncOptions, known_inlier_mask
 
 __all__ = [
@@ -231,6 +232,7 @@ def replay(
     checkpoint_every: int = CHECKPOINT_EVERY,
     stop_after: int | None = None,
     on_step: StepCallback | None = None,
+    on_update: UpdateCallback | None = None,
 ) -> ReplayOutcome:
     """Replay `graph` step by step through an `OnlineSolver` and decide at the end.
 
@@ -245,6 +247,8 @@ def replay(
             checkpoint is written, and the result is that of the steps done, its edges in
             insertion (replay) order.
         on_step: called after every update with `(step, total_steps, report)`.
+        on_update: the solver's `OnlineSolver.on_update`, called with `(solver, report)` after
+            every update (e.g. `egnc.rerun.OnlineRecorder`), also on a resumed solver.
 
     Raises:
         EgncError: the checkpoint belongs to another graph or other settings, cannot be read
@@ -256,6 +260,7 @@ def replay(
     check_instance("graph", graph, PoseGraph)
     known = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)
     _check_arguments(graph, checkpoint, checkpoint_every, stop_after, on_step)
+    check_callable("on_update", on_update)
     steps = replay_plan(graph, known)
     settings = _checkpoint_meta(graph, known, method, online_options or OnlineOptions())
     path = None if checkpoint is None else Path(checkpoint)
@@ -270,6 +275,7 @@ def replay(
             online_options=online_options,
         )
         add_gauge(solver, graph)
+    solver.on_update = on_update
     done = resumed_from = solver.steps  # one update per step
     order = np.concatenate([step.edges for step in steps]) if steps else np.zeros(0, dtype=np.int64)
     last = len(steps) if stop_after is None else min(len(steps), stop_after)

@@ -73,6 +73,7 @@ References:
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -80,7 +81,7 @@ from numpy.typing import ArrayLike
 
 from egnc.api import Result
 from egnc.errors import EgncError
-from egnc.graph.checks import check_bool
+from egnc.graph.checks import check_bool, check_callable
 from egnc.graph.index_sets import sorted_unique
 from egnc.nonlinear.factors import from_matrices
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
@@ -94,7 +95,10 @@ from egnc.online.result import online_result
 from egnc.online.state import MapState
 from egnc.robust.gnc import GncOptions, classify_inliers
 
-__all__ = ["OnlineSolver"]
+__all__ = ["OnlineSolver", "UpdateCallback"]
+
+UpdateCallback = Callable[["OnlineSolver", UpdateReport], None]
+"""Receives the solver and its `UpdateReport` at the end of every update (`OnlineSolver.on_update`)."""
 
 _RESIDUAL_AT_REST = 1e-9
 """A new edge whose whitened residual is below this at the current estimate changes no optimum."""
@@ -115,6 +119,9 @@ class OnlineSolver:
             (`warm_start`, `every_stage` and `max_stages` do not apply: online stages are always
             warm-started).
         online_options: the update protocol (`OnlineOptions`).
+        on_update: called with `(solver, report)` at the end of every `update()` (e.g. to record
+            it, `egnc.rerun.OnlineRecorder`); also the attribute `on_update`, which a checkpoint
+            does not keep.
 
     Raises:
         OptionError: an unknown `dim`, method or backend, or an options argument of the wrong class.
@@ -136,7 +143,9 @@ class OnlineSolver:
         options: SolverOptions | None = None,
         gnc_options: GncOptions | None = None,
         online_options: OnlineOptions | None = None,
+        on_update: UpdateCallback | None = None,
     ):
+        check_callable("on_update", on_update)
         settings = Settings.make(dim, method, linear_solver, options, gnc_options, online_options)
         self._settings = settings  # shared by every part: the settings below, assigned, apply to all
         self._intake = Intake(settings.dim)  # the add_* calls' entries until the next update
@@ -145,6 +154,7 @@ class OnlineSolver:
         self._arrival = ArrivalDecision(settings, self._map)  # egnc.online.decide_at_arrival
         self._log = UpdateLog()
         self.last_update: UpdateReport | None = None
+        self.on_update = on_update
 
     # ------------------------------------------------------------------ adding data
 
@@ -250,6 +260,8 @@ class OnlineSolver:
         )
         self._log.record(report)
         self.last_update = report
+        if self.on_update is not None:
+            self.on_update(self, report)
         return report
 
     # ------------------------------------------------------------------ settings
@@ -330,6 +342,13 @@ class OnlineSolver:
     def poses(self) -> np.ndarray:
         """`(N, P)` current estimate, rows in `vertex_ids` order, in the stored parametrization."""
         return from_matrices(self.dim, self._map.T)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """`(N, dim)` translations of the current estimate, rows in `vertex_ids` order (no rotation
+        is converted: cheaper than `poses` for a display after every update)."""
+        n = self._map.T.shape[-1]
+        return self._map.T[:, : n - 1, n - 1].copy()
 
     @property
     def edge_ids(self) -> np.ndarray:

@@ -57,7 +57,7 @@ from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, Problem, solve_least_squares
 from egnc.nonlinear.marginals import relative_covariances
 from egnc.robust.decision import Decision, StartContext, least_squares_report, map_credit, readmit_quantile
-from egnc.robust.gnc import GncOptions, StageReport
+from egnc.robust.gnc import GncOptions, StageReport, announce_stage
 from egnc.robust.kernels import chi2_quantile
 
 STEP_BUDGET = 4096
@@ -159,8 +159,7 @@ def elimination_decision(context: StartContext, to_beat: Decision) -> tuple[Deci
         solved = solve_least_squares(problem, poses, None, context.solver_options, context.on_iteration)
         poses = solved.poses
         reports.append(least_squares_report(solved, started, int(accepted.sum()), "elimination", "elimination"))
-        if context.on_stage is not None:
-            context.on_stage(reports[-1])
+        announce_stage(context.on_stage, reports[-1], poses)
         if solved.status == NUMERICAL_FAILURE:
             return None, tuple(reports)
         loops = np.flatnonzero(accepted & robust)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import InitVar, dataclass
+from dataclasses import InitVar, dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -278,6 +278,9 @@ class StageReport:
             `"chordal-all"` (`egnc.robust.starts`), `"regrouped"` (`egnc.robust.regroup`), `"elimination"`
             (`egnc.robust.elimination`) or `"online"` (the estimate of `egnc.online.OnlineSolver`);
             only the stages of the start that was kept (`Result.start`) shape the result.
+        poses: `(N, n, n)` pose matrices at the stage's end, in the report an `on_stage` callback
+            receives (`announce_stage`; e.g. to record each stage, `egnc.rerun`); None in
+            `Result.stages`, which holds no poses.
     """
 
     mu_min: float
@@ -291,10 +294,17 @@ class StageReport:
     cg_iterations: int = 0
     kind: StageKind = "gnc"
     start: StageStart = "guess"
+    poses: np.ndarray | None = field(default=None, repr=False)
 
 
 StageCallback = Callable[[StageReport], None]
 """Receives each stage's report as soon as the stage ends."""
+
+
+def announce_stage(on_stage: StageCallback | None, report: StageReport, poses: np.ndarray) -> None:
+    """Call `on_stage`, if any, with `report` carrying the stage's final `poses` `(N, n, n)`."""
+    if on_stage is not None:
+        on_stage(replace(report, poses=poses))
 
 
 def iteration_limited(stages: Sequence[StageReport], start: str) -> list[int]:
@@ -405,8 +415,7 @@ def run_gnc(
         poses = solution.poses
         r = factors.whitened_norms(factors.residuals(poses))
         reports.append(_stage_report(stage, robust, solution, started, graph.num_edges, start))
-        if on_stage is not None:
-            on_stage(reports[-1])
+        announce_stage(on_stage, reports[-1], poses)
         for phase, seconds in solution.timings.items():
             timings[phase] = timings.get(phase, 0.0) + seconds
         status, message = solution.status, solution.message

@@ -56,7 +56,15 @@ from egnc.nonlinear.least_squares import (
 )
 from egnc.nonlinear.marginals import ReachEstimate
 from egnc.robust.costs import readmit_quantile, truncated_cost
-from egnc.robust.gnc import GncOptions, StageCallback, StageKind, StageReport, StageStart, classify_inliers
+from egnc.robust.gnc import (
+    GncOptions,
+    StageCallback,
+    StageKind,
+    StageReport,
+    StageStart,
+    announce_stage,
+    classify_inliers,
+)
 from egnc.robust.kernels import chi2_quantile
 from egnc.robust.losses import FixedWeightLoss
 from egnc.robust.readmission import readmitted, statistic_floor
@@ -347,8 +355,7 @@ def decide_outliers(
         solved[np.packbits(inliers).tobytes()] = len(history)
         history.append((inliers, refined, truncated_cost(r, robust, d, q)))
         reports.append(least_squares_report(refined, started, int(inliers.sum()), "decision", start))
-        if on_stage is not None:
-            on_stage(reports[-1])
+        announce_stage(on_stage, reports[-1], poses)
         if np.array_equal(decided, inliers) or refined.status in (0, NUMERICAL_FAILURE):  # settled, or stuck
             settled = refined.status not in (0, NUMERICAL_FAILURE)
             break

@@ -70,7 +70,7 @@ import numpy as np
 from egnc.nonlinear.factors import to_matrices
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, Problem, SolverResult, solve_least_squares
 from egnc.robust.decision import Decision, StartContext, truncated_cost
-from egnc.robust.gnc import GncOutcome, StageReport, StageStart, classify_inliers
+from egnc.robust.gnc import GncOutcome, StageReport, StageStart, announce_stage, classify_inliers
 
 PROBE_ITERATIONS = 2
 """Least-squares iterations a chordal classification gets to show a lower truncated cost than
@@ -130,8 +130,7 @@ def chordal_decision(
         kind="probe",
         start="chordal",
     )
-    if context.on_stage is not None:
-        context.on_stage(report)
+    announce_stage(context.on_stage, report, probe.poses)
     if context.cost_at(probe.poses) >= to_beat.truncated_cost:
         return None, (report,)
     decision = context.decide(probe.poses, inliers, "chordal")
