@@ -4,13 +4,12 @@ the one warning when a log leaves the choice ambiguous."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli import egnc_solve
 
 from egnc.errors import EgncError, EgncWarning
 from egnc.io import IrlLog, read_g2o, read_irl, write_irl
@@ -118,16 +117,6 @@ def test_an_unknown_order_is_refused(grid3d, tmp_path):
         read_irl(path, "rzryrx")  # type: ignore[arg-type]
     with pytest.raises(EgncError, match="'gtsam' or 'g2o'"):
         IrlLog.from_graph(grid3d, covariance_order="xyz")  # type: ignore[arg-type]
-
-
-def egnc_solve(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "egnc.cli.solve", *map(str, args)],
-        capture_output=True,
-        text=True,
-        stdin=subprocess.DEVNULL,
-        timeout=300,
-    )
 
 
 def test_cli_option_warning_and_checkpoint_of_another_reading(grid3d, tmp_path):
