@@ -122,7 +122,7 @@ def _add_problem_arguments(parser: argparse.ArgumentParser) -> None:
         "--irl-covariance-order",
         choices=("gtsam", "g2o"),
         help="order of a 3D IRL log's covariances: gtsam (rx ry rz x y z, riSAM's reader; the default) or g2o"
-        " (x y z rx ry rz, what riSAM's g2o-2-irl writes for g2o files such as sphere2500; docs/g2o.md)",
+        " (x y z rx ry rz, what riSAM's g2o-2-irl writes for g2o files such as sphere2500; docs/online.md)",
     )
     parser.add_argument(
         "--drop-outliers", action="store_true", help="write the output graph without the rejected loop closures"

@@ -64,7 +64,7 @@ from egnc.graph.index_sets import sorted_unique
 from egnc.io.atomic import atomic_text_file
 from egnc.io.irl_covariance import (
     CovarianceOrder,
-    check_covariances,
+    bad_covariances,
     check_order,
     information,
     information_in_egnc_order,
@@ -307,7 +307,7 @@ def read_irl(path: str | os.PathLike, covariance_order: CovarianceOrder | None =
     if warning is not None:
         warnings.warn(f"{path}: {warning}", EgncWarning, stacklevel=2)
     try:
-        log = IrlLog(
+        return IrlLog(
             name=name,
             date=date,
             dim=dim,
@@ -324,7 +324,6 @@ def read_irl(path: str | os.PathLike, covariance_order: CovarianceOrder | None =
         )
     except GraphError as error:
         raise GraphError(f"{path}: {error}") from None
-    return log
 
 
 def _check_header(path: Path, dim_text: str, linearity: str, notes: str) -> None:
@@ -500,7 +499,7 @@ class _EntryParser:
 
 def _check_covariances(covariances: np.ndarray, lines: np.ndarray, path: Path) -> None:
     """Reject covariances that are not symmetric positive definite, or whose inverse is not."""
-    bad, problem = check_covariances(covariances)
+    bad, problem = bad_covariances(covariances)
     if len(bad):
         raise G2oFormatError(
             f"{problem}; {len(bad)} of the file's {len(covariances)} such matrices are affected",
@@ -511,7 +510,7 @@ def _check_covariances(covariances: np.ndarray, lines: np.ndarray, path: Path) -
 
 def _build_graph(log: IrlLog) -> PoseGraph:
     """The `PoseGraph` of a log: ids, egnc measurements/information, odometry-composed guess."""
-    bad, problem = check_covariances(log.covariances)
+    bad, problem = bad_covariances(log.covariances)
     if len(bad):
         where = f"line {log.entry_lines[bad[0]]}" if log.entry_lines[bad[0]] else f"edge {bad[0]}"
         raise GraphError(f"{where}: {problem}")

@@ -35,7 +35,7 @@ from egnc.graph.validity import not_positive_definite
 __all__ = [
     "ANISOTROPY_RATIO",
     "CovarianceOrder",
-    "check_covariances",
+    "bad_covariances",
     "check_order",
     "declared_order",
     "information",
@@ -134,7 +134,7 @@ def reading_warning(
     )
 
 
-def check_covariances(covariances: np.ndarray) -> tuple[np.ndarray, str]:
+def bad_covariances(covariances: np.ndarray) -> tuple[np.ndarray, str]:
     """Indices of the `(K, d, d)` covariances egnc cannot use, and what is wrong with the first."""
     scale = np.abs(covariances).max(axis=(1, 2))
     asymmetric = np.abs(covariances - covariances.swapaxes(1, 2)).max(axis=(1, 2)) > 1e-9 * scale
