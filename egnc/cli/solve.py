@@ -122,6 +122,12 @@ def _add_problem_arguments(parser: argparse.ArgumentParser) -> None:
         " nearest-pd clips their eigenvalues, diagonal keeps their diagonal (one warning with the count)",
     )
     parser.add_argument(
+        "--irl-covariance-order",
+        choices=("gtsam", "g2o"),
+        help="order of a 3D IRL log's covariances: gtsam (rx ry rz x y z, riSAM's reader; the default) or g2o"
+        " (x y z rx ry rz, what riSAM's g2o-2-irl writes for g2o files such as sphere2500; docs/online.md)",
+    )
+    parser.add_argument(
         "--drop-outliers", action="store_true", help="write the output graph without the rejected loop closures"
     )
     parser.add_argument(
@@ -449,12 +455,14 @@ def _check_options(args: argparse.Namespace) -> None:
         raise EgncError("--decide-at-arrival sets how an --online update with --method egnc solves")
     if is_irl(args.input) and (args.skip_unknown or args.information != "strict"):
         raise EgncError("--skip-unknown and --information apply to g2o files, not to IRL logs")
+    if args.irl_covariance_order is not None and not is_irl(args.input):
+        raise EgncError("--irl-covariance-order applies to IRL logs, not to g2o files")
 
 
 def _read(args: argparse.Namespace) -> tuple[PoseGraph, np.ndarray]:
     """The input graph and its odometry: an IRL log's ODOMETRY entries, a g2o file's consecutive-id edges."""
     if is_irl(args.input):
-        log = read_irl(args.input)
+        log = read_irl(args.input, args.irl_covariance_order)
         return log.graph, log.is_odometry
     graph = read_g2o(args.input, skip_unknown=args.skip_unknown, information=args.information)
     return graph, graph.is_odometry

@@ -14,13 +14,16 @@ free-form notes) followed by one entry per line, in time order:
 
 POSE is `x y theta` in 2D and `x y z rx ry rz` in 3D, with the rotation
 `Rz(rz) Ry(ry) Rx(rx)` (GTSAM's `Rot3::RzRyRx`). COV is the full covariance matrix, row-major,
-d x d (d = 3 or 6), in GTSAM's tangent order, which is how riSAM's parser uses it
-(`noiseModel::Gaussian::Covariance`): `(x, y, theta)` in 2D and `(rx, ry, rz, x, y, z)`,
-rotation first, in 3D. egnc orders its tangent translation first, so in 3D the information
-matrix `COV^-1` is block-permuted (no rescaling), as GTSAM's `readG2o` does the other way round.
-(riSAM's own g2o converter writes the inverse of the g2o information without that permutation;
-only its consumer defines the meaning, and for the isotropic covariances of its data sets the
-two agree.)
+d x d (d = 3 or 6): `(x, y, theta)` in 2D. In 3D the format leaves its order to the programs, and
+riSAM's two disagree (`egnc.io.irl_covariance`): its C++ reader takes GTSAM's tangent order
+`(rx, ry, rz, x, y, z)`, rotation first (`covariance_order="gtsam"`, the default), while its
+`g2o-2-irl` converter writes the inverse g2o information in g2o's order `(x, y, z, rx, ry, rz)`
+(`covariance_order="g2o"`). For isotropic covariances the two readings agree; for logs converted
+from anisotropic g2o files (sphere2500) only "g2o" keeps the g2o file's noise model, and
+`read_irl` warns once when the blocks differ and neither the caller nor the notes line chose the
+order.
+egnc orders its tangent translation first, so the "gtsam" reading block-permutes the information
+matrix `COV^-1` (no rescaling), as GTSAM's `readG2o` does the other way round.
 
 egnc reads the entries riSAM's data sets use: every PRIOR and ODOMETRY with one mode, every
 LOOP with its measurement as mode 0 and at most a NULL hypothesis as mode 1. Multi-hypothesis
@@ -47,18 +50,28 @@ from __future__ import annotations
 
 import datetime
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from egnc.errors import EgncError, G2oFormatError, GraphError
+from egnc.errors import EgncError, EgncWarning, G2oFormatError, GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
 from egnc.graph.checks import check_instance
 from egnc.graph.connectivity import connected_components, describe_components, require_connected
 from egnc.graph.index_sets import sorted_unique
-from egnc.graph.validity import not_positive_definite
 from egnc.io.atomic import atomic_text_file
+from egnc.io.irl_covariance import (
+    CovarianceOrder,
+    bad_covariances,
+    check_order,
+    information,
+    information_in_egnc_order,
+    order_mark,
+    reading_warning,
+    to_file_order,
+)
 from egnc.io.numbers import check_line_characters, format_floats, is_float, parse_id, shown
 from egnc.io.text import read_text
 from egnc.lie import so3
@@ -74,8 +87,6 @@ IRL_POSE_SIZE = {2: 3, 3: 6}
 
 _NULL = "NULL"
 _ENTRY_TAGS = ("PRIOR", "ODOMETRY", "LOOP")
-_GTSAM_TO_EGNC_3D = np.array([3, 4, 5, 0, 1, 2])
-"""Index map from GTSAM's Pose3 tangent order `(rx, ry, rz, x, y, z)` to egnc's `(x, y, z, rx, ry, rz)`."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,7 +96,7 @@ class IrlPrior:
     Attributes:
         vertex_id: the pose it applies to.
         pose: `(M,)` prior mean in the IRL parametrization (`x y theta` or `x y z rx ry rz`).
-        covariance: `(d, d)` covariance as written in the file (GTSAM's tangent order).
+        covariance: `(d, d)` covariance as written in the file (in the log's `covariance_order`).
     """
 
     vertex_id: int
@@ -111,12 +122,15 @@ class IrlLog:
         dim: pose dimension, 2 or 3 (header line 3).
         edge_ids: `(E, 2)` int64 vertex ids `(i, j)` (ODOMETRY start/end, LOOP pose a/pose b).
         measurements: `(E, M)` relative poses in the IRL parametrization (`M` = 3 or 6).
-        covariances: `(E, d, d)` covariances as written (GTSAM's tangent order).
+        covariances: `(E, d, d)` covariances as written (in `covariance_order`).
         is_odometry: `(E,)` bool, ODOMETRY entries (the rest are LOOP entries).
         is_outlier: `(E,)` bool, ground truth: LOOP entries whose correct mode is NULL.
         has_null: `(E,)` bool, LOOP entries that list a NULL hypothesis (mode 1).
         prior: the PRIOR entry, or None when the log has none (egnc then fixes the lowest id).
         entry_lines: `(E,)` 1-based line of each entry in the file (0 when built in memory).
+        covariance_order: how the 3D covariances are read, `"gtsam"` (rotation first, riSAM's
+            reader, the default) or `"g2o"` (translation first, riSAM's g2o-2-irl output);
+            irrelevant in 2D (`egnc.io.irl_covariance`).
         graph: the `PoseGraph` (derived, not a constructor argument): information =
             covariance^-1 in egnc's tangent order, initial guess = odometry composed from the
             prior (see the module docstring).
@@ -134,9 +148,11 @@ class IrlLog:
     has_null: np.ndarray
     prior: IrlPrior | None = None
     entry_lines: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    covariance_order: CovarianceOrder = "gtsam"
     graph: PoseGraph = field(init=False)
 
     def __post_init__(self) -> None:
+        check_order(self.covariance_order)
         if self.dim not in POSE_SIZE:
             raise GraphError(f"IRL pose dimension must be 2 or 3, got {self.dim}")
         for name in ("name", "date", "notes"):
@@ -193,12 +209,15 @@ class IrlLog:
         date: str | None = None,
         notes: str = "",
         prior_covariance: np.ndarray | None = None,
+        covariance_order: CovarianceOrder = "gtsam",
     ) -> IrlLog:
         """Describe a pose graph as an IRL log, the way riSAM's g2o converter does.
 
         Odometry edges (consecutive ids) become ODOMETRY entries, every other edge a LOOP with a
         NULL hypothesis; the prior sits on the lowest id at its pose in `graph`. Covariances are
-        the inverse information matrices (rotation block first in 3D).
+        the inverse information matrices, in 3D in `covariance_order` (rotation first by default,
+        for riSAM's reader), and a 3D log's notes line declares that order (`order_mark`), so
+        reading it back with the same order stays silent.
 
         Args:
             graph: the pose graph; its edge order is kept.
@@ -206,17 +225,18 @@ class IrlLog:
             name, notes: header lines 1 and 5.
             date: header line 2, `YYYY-MM-DD`; default today.
             prior_covariance: `(d, d)` prior covariance; default `0.1 I`, riSAM's converter default.
+            covariance_order: `"gtsam"` or `"g2o"`, the order of the 3D covariances written.
         """
+        check_order(covariance_order)
         d = graph.tangent_dim
         is_odometry = graph.is_odometry
         outliers = np.zeros(graph.num_edges, bool) if is_outlier is None else np.asarray(is_outlier, dtype=bool)
         if outliers.shape != (graph.num_edges,) or np.any(outliers & is_odometry):
             raise EgncError(f"is_outlier must be an ({graph.num_edges},) bool mask of loop closures")
         covariances = np.linalg.inv(graph.information)
-        covariances = 0.5 * (covariances + covariances.swapaxes(1, 2))
+        covariances = to_file_order(0.5 * (covariances + covariances.swapaxes(1, 2)), graph.dim, covariance_order)
         if graph.dim == 3:
-            order = np.argsort(_GTSAM_TO_EGNC_3D)  # egnc order -> GTSAM order
-            covariances = covariances[:, order][:, :, order]
+            notes = f"{notes} {order_mark(covariance_order)}" if notes else order_mark(covariance_order)
         prior_pose = _to_irl_poses(graph.dim, graph.poses[:1])[0]
         return cls(
             name=name,
@@ -234,11 +254,20 @@ class IrlLog:
                 prior_pose,
                 0.1 * np.eye(d) if prior_covariance is None else prior_covariance,
             ),
+            covariance_order=covariance_order,
         )
 
 
-def read_irl(path: str | os.PathLike) -> IrlLog:
+def read_irl(path: str | os.PathLike, covariance_order: CovarianceOrder | None = None) -> IrlLog:
     """Read an IRL file (2D or 3D, "nonlinear") into an `IrlLog`.
+
+    Args:
+        path: the log.
+        covariance_order: the order of a 3D log's covariances: `"gtsam"` (rotation first, as
+            riSAM's C++ reader takes them; None, the default, reads so too) or `"g2o"` (translation
+            first, as riSAM's g2o-2-irl converter writes them). Ignored in 2D. With the default, when
+            the two readings differ on this file and its notes do not declare the order, one
+            `EgncWarning` says so; a reading other than the one the notes declare is said too.
 
     Raises:
         G2oFormatError: the file cannot be read or is malformed; names the file and 1-based line.
@@ -246,6 +275,8 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
             reached by odometry, a covariance that is not positive definite).
     """
     check_instance("path", path, (str, os.PathLike), "an IRL file path (str or os.PathLike)")
+    if covariance_order is not None:
+        check_order(covariance_order)
     path = Path(path)
     text = read_text(path)
     lines = text.split("\n")
@@ -272,6 +303,9 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
     _check_covariances(covariances, lines_array, path)
     if parser.prior is not None:
         _check_covariances(parser.prior.covariance[None], np.array([parser.prior_line]), path)
+    warning = reading_warning(covariances, dim, notes, covariance_order)
+    if warning is not None:
+        warnings.warn(f"{path}: {warning}", EgncWarning, stacklevel=2)
     try:
         return IrlLog(
             name=name,
@@ -286,6 +320,7 @@ def read_irl(path: str | os.PathLike) -> IrlLog:
             has_null=np.array(parser.has_null, dtype=bool),
             prior=parser.prior,
             entry_lines=lines_array,
+            covariance_order=covariance_order or "gtsam",
         )
     except GraphError as error:
         raise GraphError(f"{path}: {error}") from None
@@ -464,7 +499,7 @@ class _EntryParser:
 
 def _check_covariances(covariances: np.ndarray, lines: np.ndarray, path: Path) -> None:
     """Reject covariances that are not symmetric positive definite, or whose inverse is not."""
-    bad, problem = _bad_covariances(covariances)
+    bad, problem = bad_covariances(covariances)
     if len(bad):
         raise G2oFormatError(
             f"{problem}; {len(bad)} of the file's {len(covariances)} such matrices are affected",
@@ -473,27 +508,9 @@ def _check_covariances(covariances: np.ndarray, lines: np.ndarray, path: Path) -
         )
 
 
-def _bad_covariances(covariances: np.ndarray) -> tuple[np.ndarray, str]:
-    """Indices of the `(K, d, d)` covariances egnc cannot use, and what is wrong with the first."""
-    scale = np.abs(covariances).max(axis=(1, 2))
-    asymmetric = np.abs(covariances - covariances.swapaxes(1, 2)).max(axis=(1, 2)) > 1e-9 * scale
-    bad = np.union1d(np.flatnonzero(asymmetric), not_positive_definite(covariances))
-    if len(bad):
-        return bad, "covariance is not symmetric positive definite"
-    bad = not_positive_definite(_information(covariances))
-    return bad, "covariance is too close to singular: its inverse (the information matrix) overflows a double"
-
-
-def _information(covariances: np.ndarray) -> np.ndarray:
-    """`(K, d, d)` symmetric inverses of symmetric positive-definite covariances (inf where they overflow)."""
-    with np.errstate(all="ignore"):
-        information = np.linalg.inv(covariances)
-    return 0.5 * (information + information.swapaxes(1, 2))
-
-
 def _build_graph(log: IrlLog) -> PoseGraph:
     """The `PoseGraph` of a log: ids, egnc measurements/information, odometry-composed guess."""
-    bad, problem = _bad_covariances(log.covariances)
+    bad, problem = bad_covariances(log.covariances)
     if len(bad):
         where = f"line {log.entry_lines[bad[0]]}" if log.entry_lines[bad[0]] else f"edge {bad[0]}"
         raise GraphError(f"{where}: {problem}")
@@ -503,9 +520,7 @@ def _build_graph(log: IrlLog) -> PoseGraph:
     vertex_ids = sorted_unique(ids)
     rows = np.searchsorted(vertex_ids, log.edge_ids)
     measurements = _from_irl_poses(log.dim, log.measurements)
-    information = _information(log.covariances)
-    if log.dim == 3:
-        information = information[:, _GTSAM_TO_EGNC_3D][:, :, _GTSAM_TO_EGNC_3D]
+    information_matrices = information_in_egnc_order(information(log.covariances), log.dim, log.covariance_order)
 
     require_connected(vertex_ids, rows)
     root = 0 if log.prior is None else int(np.searchsorted(vertex_ids, log.prior.vertex_id))
@@ -532,7 +547,7 @@ def _build_graph(log: IrlLog) -> PoseGraph:
         poses=poses,
         edges=rows,
         measurements=measurements,
-        information=information,
+        information=information_matrices,
         fixed=fixed,
         edge_lines=log.entry_lines,
     )
