@@ -83,7 +83,7 @@ def read_labels(path: str | Path) -> tuple[np.ndarray, dict[str, Any]]:
     except json.JSONDecodeError as error:
         raise EgncError(f"{path}:{error.lineno}: labels file is not valid JSON: {error.msg}") from None
     if not isinstance(content, dict) or content.get("format") != LABELS_FORMAT:
-        raise EgncError(f"{path}: not an egnc labels file (expected \"format\": \"{LABELS_FORMAT}\")")
+        raise EgncError(f'{path}: not an egnc labels file (expected "format": "{LABELS_FORMAT}")')
     num_edges = content.get("num_edges")
     indices = content.get("outlier_edges")
     if not _is_int(num_edges) or num_edges < 0:
