@@ -87,3 +87,46 @@ def test_multipath_generator_is_seeded_and_checks_its_arguments():
     assert np.all((jumps[a.is_outlier] >= 10) & (jumps[a.is_outlier] <= 50)) and not jumps[~a.is_outlier].any()
     with pytest.raises(OptionError, match="no position prior"):
         add_multipath_outliers(grid_world(2, 20, seed=0).graph, 10)
+
+
+def test_labels_keep_prior_outliers_apart_and_old_files_read_as_before(tmp_path):
+    from egnc.io.labels import read_labels, read_prior_labels, write_labels
+
+    edges, priors = np.array([False, True, False]), np.array([True, False, False, True])
+    write_labels(tmp_path / "a.labels.json", edges, {"seed": 1}, priors)
+    is_outlier, meta = read_labels(tmp_path / "a.labels.json")
+    np.testing.assert_array_equal(is_outlier, edges)
+    assert meta == {"seed": 1}
+    np.testing.assert_array_equal(read_prior_labels(tmp_path / "a.labels.json"), priors)
+    write_labels(tmp_path / "b.labels.json", edges)
+    assert read_prior_labels(tmp_path / "b.labels.json") is None
+
+
+def test_egnc_corrupt_adds_labelled_gnss_fixes_that_the_solve_rejects(tmp_path):
+    from egnc.cli.corrupt import main
+    from egnc.io.g2o import read_g2o
+    from egnc.io.labels import read_labels, read_prior_labels
+    from egnc.metrics import precision_recall_by_kind
+
+    out = tmp_path / "gnss.g2o"
+    source = "datasets/grid2d.g2o"
+    argv = [source, "--percent", "10", "--seed", "4", "--gnss-every", "5", "--gnss-sigma", "1"]
+    assert main([*argv, "--gnss-outliers", "20", "--gnss-bursts", "-q", "-o", str(out)]) == 0
+    graph = read_g2o(out)
+    false_edges, _ = read_labels(tmp_path / "gnss.labels.json")
+    false_priors = read_prior_labels(tmp_path / "gnss.labels.json")
+    assert graph.num_priors == 100 and false_priors is not None and false_priors.sum() == 20
+    result = egnc.solve(graph)
+    rejected_priors = np.isin(graph.prior_factor_index, result.rejected_priors)
+    scores = precision_recall_by_kind(~result.inliers, false_edges, rejected_priors, false_priors)
+    assert scores == {"loops": (1.0, 1.0), "priors": (1.0, 1.0)}
+
+
+def test_ate_without_alignment_sees_a_shifted_map():
+    from egnc.metrics import ate
+
+    reference = np.zeros((4, 3))
+    reference[:, 0] = np.arange(4)
+    shifted = reference + [1.0, 0.0, 0.0]
+    assert ate(shifted, reference, 2) == pytest.approx(0.0, abs=1e-12)
+    assert ate(shifted, reference, 2, align=False) == pytest.approx(1.0)

@@ -10,7 +10,7 @@ from egnc.datasets.false_loops import (
 from egnc.datasets.gnss_priors import PriorOutliers, add_multipath_outliers, add_position_priors
 from egnc.datasets.grid_world import GridWorld, grid_world
 from egnc.datasets.noisy_manhattan import NoisyGraph, make_noisy_manhattan
-from egnc.io.labels import read_labels, write_labels
+from egnc.io.labels import read_labels, read_prior_labels, write_labels
 
 __all__ = [
     "OUTLIER_RULES",
@@ -26,5 +26,6 @@ __all__ = [
     "grid_world",
     "make_noisy_manhattan",
     "read_labels",
+    "read_prior_labels",
     "write_labels",
 ]

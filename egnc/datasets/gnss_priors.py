@@ -3,8 +3,8 @@
 The positions are taken from reference poses (e.g. the outlier-free optimum, or a ground truth)
 and perturbed by isotropic noise of standard deviation `sigma` metres; each prior's information
 is `I / sigma^2`, so that a prior's `r^2` is chi-square with `dim` degrees of freedom when the
-reference is the truth. Priors are appended after the graph's own (no line: after every edge in
-the factor index).
+reference is the truth. Priors are appended after the graph's own and after every edge in the
+factor index (`_factor_lines`: a written file keeps the edges in graph order, then the fixes).
 
 `add_multipath_outliers` then moves some fixes by jumps of tens of metres, singly or in bursts of
 consecutive fixes (a street canyon's multipath), and labels them.
@@ -53,13 +53,14 @@ def add_position_priors(
     measurements[:, :dim] = reference[rows, :dim] + rng.normal(scale=sigma, size=(len(rows), dim))
     information = np.zeros((len(rows), graph.tangent_dim, graph.tangent_dim))
     information[:, np.arange(dim), np.arange(dim)] = 1.0 / sigma**2
+    edge_lines, prior_lines = _factor_lines(graph, len(rows))
     priors = Priors(
         dim,
         np.concatenate((old.rows, rows)),
         np.concatenate((old.kinds, np.full(len(rows), POSITION, dtype=np.int8))),
         np.concatenate((old.measurements, measurements)),
         np.concatenate((old.information, information)),
-        np.concatenate((old.lines, np.zeros(len(rows), dtype=np.int64))),
+        np.concatenate((old.lines, prior_lines)),
         np.concatenate((old.param_ids, np.zeros(len(rows), dtype=np.int64))),
     )
     return PoseGraph(
@@ -70,10 +71,24 @@ def add_position_priors(
         graph.measurements,
         graph.information,
         fixed=graph.fixed,
-        edge_lines=graph.edge_lines,
+        edge_lines=edge_lines,
         unknown_lines=graph.unknown_lines,
         priors=priors,
     )
+
+
+def _factor_lines(graph: PoseGraph, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """`(E,)` edge lines and `(count,)` lines of new priors that put the priors after every factor
+    and keep the edges in graph order (the factor index, `PoseGraph.edge_factor_index`, and so a
+    written file). A graph whose edges are not numbered in row order (a generator's edges
+    without a line among read ones, `egnc.datasets.add_false_loops`) and holds no prior yet is
+    numbered afresh, 1 to E: its file's edge order is then its graph order, as its labels expect."""
+    lines = graph.edge_lines
+    in_order = len(lines) and lines[0] > 0 and np.all(np.diff(lines) > 0)
+    if not in_order and not graph.num_priors:
+        lines = np.arange(1, graph.num_edges + 1, dtype=np.int64)
+    last = max(int(lines.max(initial=0)), int(graph.priors.lines.max(initial=0)))
+    return lines, last + 1 + np.arange(count, dtype=np.int64)
 
 
 @dataclass(frozen=True, eq=False)
