@@ -4,12 +4,17 @@
     python benchmarks/robust.py drifted [--data-dir DIR] [--files ...] [--drifted ...] [--heading 0.1,0.3]
         [--scaled 10] [--seeds 1,2] [--extra FILE.g2o,...] [--time-limit 300] [--no-gtsam]
     python benchmarks/robust.py gnc [--loss gm|tls] [--time-limit 600] [FILE ...]
+    python benchmarks/robust.py gnss [--files manhattanOlson3500,...] [--loops 0,10,30] [--priors 0,10,20]
+        [--every 10] [--sigma 2] [--seed 1] [--no-gtsam]
 
 - `clean` (`_lib/robust_clean.py`): files without false loops, the default `egnc.solve` against
   `l2`: loops rejected, ATE to the `l2` optimum, both costs, warnings and times.
 - `drifted` (`_lib/robust_drifted.py`): the same files from their own guess and from guesses
   re-chained from odometry with seeded drift; egnc, egnc from its guess only, GTSAM's GNC-TLS and
   LM, each a child process under a time limit: loops rejected and cost over the optimum.
+- `gnss` (`_lib/robust_gnss.py`): GNSS-like position priors with multipath jumps (single and in
+  bursts) and false loops; egnc and GTSAM's GNC-TLS: precision and recall for loops and priors
+  apart, ATE without alignment, time against the clean solve.
 - `gnc` (`_lib/gtsam_gnc.py`): GTSAM's `GncLMOptimizer` on g2o files, each in a child killed at the
   limit: status, final error, loops with weight < 0.5.
 
@@ -64,6 +69,14 @@ def parser() -> argparse.ArgumentParser:
     gnc.add_argument("files", nargs="*", help="g2o files or dataset names (default: the reference datasets)")
     gnc.add_argument("--loss", choices=("gm", "tls"), default="tls", help="GNC-GM or GNC-TLS (default tls)")
     gnc.add_argument("--time-limit", type=float, default=600.0, help="seconds per file")
+    gnss = commands.add_parser("gnss", help="GNSS fixes with multipath outliers and false loops, egnc and GTSAM")
+    gnss.add_argument("--files", default="manhattanOlson3500,sphere2500,city10000")
+    gnss.add_argument("--loops", default="0,10,30", help="false-loop shares, percent")
+    gnss.add_argument("--priors", default="0,10,20", help="multipath shares of the fixes, percent")
+    gnss.add_argument("--every", type=int, default=10, help="a fix every K poses")
+    gnss.add_argument("--sigma", type=float, default=2.0, help="fix noise per coordinate, metres")
+    gnss.add_argument("--seed", type=int, default=1)
+    gnss.add_argument("--no-gtsam", action="store_true")
     return top
 
 
@@ -75,6 +88,11 @@ def main(argv: list[str] | None = None) -> int:
         from _lib import robust_clean
 
         return robust_clean.run(args.data_dir, args.files, args.gtsam_chordal)
+    if args.command == "gnss":
+        from _lib import robust_gnss
+
+        print(command_echo(given))
+        return robust_gnss.run(args)
     if args.command == "drifted":
         from _lib import robust_drifted
 
