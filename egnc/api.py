@@ -26,6 +26,7 @@ from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.nonlinear.initialize import initialize_poses
 from egnc.nonlinear.least_squares import STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
 from egnc.nonlinear.marginals import pose_covariances
+from egnc.nonlinear.prior_alignment import align_to_priors
 from egnc.robust.decision import StartContext
 from egnc.robust.factor_set import FactorSet
 from egnc.robust.gnc import (
@@ -67,23 +68,34 @@ def initial_guess(graph: PoseGraph, init: str, known_inliers: np.ndarray, linear
             tree when it was read). `"odometry"`: the known-inlier edges composed from the gauge
             pose(s), ignoring the file's other poses. `"chordal"`: `egnc.nonlinear.chordal`, rotations by the
             chordal relaxation then translations, over every edge: independent of odometry drift,
-            but it trusts every loop closure, so false loops distort it (BENCHMARKS.md).
+            but it trusts every loop closure, so false loops distort it (BENCHMARKS.md). With
+            priors and no FIX line, both are moved rigidly onto the priors (a trimmed fit that
+            wrong fixes do not drag, `egnc.nonlinear.prior_alignment`): a map in their frame.
         known_inliers: `(E,)` bool, the edges `"odometry"` composes.
         linear_solver: resolved backend, for `"chordal"`.
     """
     if init == "file":
         return graph.poses
     if init == "chordal":
-        return chordal_initialization(graph, linear_solver=linear_solver)
+        return _in_priors_frame(graph, chordal_initialization(graph, linear_solver=linear_solver))
     if init == "odometry":
         gauge = graph.fixed if graph.fixed.any() else np.arange(graph.num_poses) == 0
         try:
-            return initialize_poses(
+            chained = initialize_poses(
                 graph.dim, graph.edges[known_inliers], graph.measurements[known_inliers], poses=graph.poses, known=gauge
             )
         except GraphError as error:
             raise GraphError(f"init 'odometry': {error}; use init 'file' or 'chordal'") from None
+        return _in_priors_frame(graph, chained)
     raise EgncError(f"unknown init {init!r}: choose one of {', '.join(INITIALIZATIONS)}")
+
+
+def _in_priors_frame(graph: PoseGraph, poses: np.ndarray) -> np.ndarray:
+    """`(N, P)` `poses` moved onto the graph's priors (`egnc.nonlinear.prior_alignment`) where
+    they set the frame: the graph has priors and no pose held by a FIX line."""
+    if not graph.num_priors or graph.fixed.any():
+        return poses
+    return align_to_priors(graph, poses)
 
 
 def solve(

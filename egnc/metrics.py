@@ -36,6 +36,7 @@ import numpy as np
 from egnc.errors import EgncError
 from egnc.graph import POSE_SIZE
 from egnc.nonlinear.factors import group_of, to_matrices
+from egnc.nonlinear.prior_alignment import rigid_fit
 
 __all__ = ["RelativePoseError", "ate", "precision_recall", "precision_recall_by_kind", "rpe", "success"]
 
@@ -116,26 +117,9 @@ def ate(poses: np.ndarray, reference: np.ndarray, dim: int, *, align: bool = Tru
     q = _positions(reference, dim, "reference")
     if p.shape != q.shape:
         raise EgncError(f"ate: poses has {len(p)} rows but reference has {len(q)}")
-    R, t = _rigid_alignment(p, q) if align else (np.eye(dim), np.zeros(dim))
+    R, t = rigid_fit(p, q) if align else (np.eye(dim), np.zeros(dim))
     error = p @ R.T + t - q
     return float(np.sqrt(np.mean(np.sum(error * error, axis=1))))
-
-
-def _rigid_alignment(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The rotation `(k, k)` and translation `(k,)` minimizing `sum |R p_i + t - q_i|^2`.
-
-    Umeyama (1991) without scale (Kabsch): with the cross-covariance
-    `H = sum (p_i - p_mean) (q_i - q_mean)^T = U S V^T`, `R = V diag(1, ..., 1, det(V U^T)) U^T`;
-    the last sign turns the best orthogonal fit into the best rotation when the former is a
-    reflection.
-    """
-    p_mean, q_mean = p.mean(axis=0), q.mean(axis=0)
-    H = (p - p_mean).T @ (q - q_mean)
-    U, _, Vt = np.linalg.svd(H)
-    signs = np.ones(len(H))
-    signs[-1] = 1.0 if np.linalg.det(Vt.T @ U.T) > 0.0 else -1.0
-    R = (Vt.T * signs) @ U.T
-    return R, q_mean - R @ p_mean
 
 
 @dataclass(frozen=True)

@@ -130,3 +130,29 @@ def test_ate_without_alignment_sees_a_shifted_map():
     shifted = reference + [1.0, 0.0, 0.0]
     assert ate(shifted, reference, 2) == pytest.approx(0.0, abs=1e-12)
     assert ate(shifted, reference, 2, align=False) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_alignment_to_priors_ignores_multipath_fixes(dim):
+    from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
+    from egnc.nonlinear.prior_alignment import align_to_priors
+
+    graph, optimum = gnss_graph(dim, 200)
+    corrupted = add_multipath_outliers(graph, 20, seed=4, bursts=True, burst_size=(3, 6)).graph
+    d = 3 if dim == 2 else 6
+    motion = group_of(dim).exp(np.linspace(0.3, 0.9, d) * 5)  # a world-frame motion, metres and radians
+    moved = from_matrices(dim, motion @ to_matrices(dim, optimum))
+    aligned = align_to_priors(corrupted, moved)
+    assert np.max(np.abs(aligned[:, :dim] - optimum[:, :dim])) < 1.0  # fixes have sigma 1 m
+
+
+@pytest.mark.parametrize("init", ["odometry", "chordal"])
+def test_odometry_and_chordal_starts_are_in_the_priors_frame(init):
+    from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
+
+    graph, _ = gnss_graph(2)
+    corrupted = add_multipath_outliers(graph, 20, seed=5, bursts=True, burst_size=(3, 6))
+    turned = from_matrices(2, group_of(2).exp(np.array([30.0, -20.0, 2.0])) @ to_matrices(2, graph.poses))
+    result = egnc.solve(corrupted.graph.with_poses(turned), init=init)
+    expected = corrupted.graph.prior_factor_index[corrupted.is_outlier]
+    np.testing.assert_array_equal(np.sort(result.rejected_priors), np.sort(expected))
