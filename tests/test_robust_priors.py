@@ -85,6 +85,10 @@ def test_multipath_generator_is_seeded_and_checks_its_arguments():
     np.testing.assert_array_equal(a.graph.priors.measurements, b.graph.priors.measurements)
     jumps = np.linalg.norm(a.graph.priors.measurements[:, :2] - graph.priors.measurements[:, :2], axis=1)
     assert np.all((jumps[a.is_outlier] >= 10) & (jumps[a.is_outlier] <= 50)) and not jumps[~a.is_outlier].any()
+    _, optimum = gnss_graph(2, 100)
+    c = add_multipath_outliers(graph, 30, seed=1, reference_poses=optimum)
+    off = np.linalg.norm(c.graph.priors.measurements[:, :2] - optimum[graph.priors.rows, :2], axis=1)
+    assert np.all((off[c.is_outlier] >= 10 - 1e-9) & (off[c.is_outlier] <= 50 + 1e-9))  # off by the jump itself
     with pytest.raises(OptionError, match="no position prior"):
         add_multipath_outliers(grid_world(2, 20, seed=0).graph, 10)
 

@@ -59,7 +59,7 @@ def cases(name: str, loops: list[float], priors: list[float], every: int, sigma:
         reference = egnc.solve(fixed.subgraph_edges(~false_edges), "l2").graph.poses
         for prior_share in priors:
             for bursts in (False, True) if prior_share else (False,):
-                moved = add_multipath_outliers(fixed, prior_share, seed=seed, bursts=bursts)
+                moved = add_multipath_outliers(fixed, prior_share, seed=seed, bursts=bursts, reference_poses=optimum)
                 built.append(
                     Case(name, loop_share, prior_share, bursts, moved.graph, false_edges, moved.is_outlier, reference)
                 )

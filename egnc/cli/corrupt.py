@@ -120,7 +120,9 @@ def _with_gnss(
     if args.gnss_every is None:
         return graph, None, {}
     with_priors = add_position_priors(graph, reference, every=args.gnss_every, sigma=args.gnss_sigma, seed=args.seed)
-    moved = add_multipath_outliers(with_priors, args.gnss_outliers, seed=args.seed, bursts=args.gnss_bursts)
+    moved = add_multipath_outliers(
+        with_priors, args.gnss_outliers, seed=args.seed, bursts=args.gnss_bursts, reference_poses=reference
+    )
     meta: dict[str, object] = {
         "gnss_generator": "egnc.datasets.add_position_priors, add_multipath_outliers",
         "gnss_every": args.gnss_every,

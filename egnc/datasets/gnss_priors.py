@@ -112,6 +112,7 @@ def add_multipath_outliers(
     bursts: bool = False,
     jump: tuple[float, float] = (10.0, 50.0),
     burst_size: tuple[int, int] = (5, 20),
+    reference_poses: np.ndarray | None = None,
 ) -> PriorOutliers:
     """Move `percent` % of the graph's position priors by multipath jumps, and label them.
 
@@ -129,6 +130,11 @@ def add_multipath_outliers(
         bursts: consecutive fixes in bursts instead of single jumps.
         jump: smallest and largest jump, metres.
         burst_size: smallest and largest burst, fixes.
+        reference_poses: `(N, P)` the poses the fixes were drawn around (`add_position_priors`);
+            given, a moved fix is its pose's reference position plus the jump, so that it is
+            off by the jump itself (a jump added to the fix's own noise can cancel part of it:
+            an 11 m jump landed 6 m from the truth, within the noise of a 2 m fix). None adds
+            the jump to the fix as measured.
 
     Raises:
         OptionError: an argument out of range, or a graph without position priors.
@@ -161,6 +167,12 @@ def add_multipath_outliers(
         moved[chosen] = True
         offsets[chosen] = _jumps(rng, wanted, graph.dim, low, high)
     measurements = graph.priors.measurements.copy()
+    if reference_poses is not None:
+        reference = np.asarray(reference_poses, dtype=np.float64)
+        if reference.shape != graph.poses.shape:
+            raise OptionError(f"reference_poses must have shape {graph.poses.shape}, got {reference.shape}")
+        origin = reference[graph.priors.rows[positions], : graph.dim]
+        measurements[positions[moved], : graph.dim] = origin[moved]
     measurements[positions, : graph.dim] += offsets
     is_outlier = np.zeros(graph.num_priors, dtype=bool)
     is_outlier[positions] = moved
