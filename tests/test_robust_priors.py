@@ -160,3 +160,11 @@ def test_odometry_and_chordal_starts_are_in_the_priors_frame(init):
     result = egnc.solve(corrupted.graph.with_poses(turned), init=init)
     expected = corrupted.graph.prior_factor_index[corrupted.is_outlier]
     np.testing.assert_array_equal(np.sort(result.rejected_priors), np.sort(expected))
+
+
+def test_online_replay_of_a_graph_with_priors_runs_on_its_edges():
+    from egnc.online.replay import replay
+
+    graph, _ = gnss_graph(2, 120)
+    outcome = replay(graph)
+    assert outcome.result.rejected_edges.shape == (0,)

@@ -115,10 +115,16 @@ class Result:
         loops = int(np.count_nonzero(~self.known_inliers))
         return (
             f"Result(method={self.method!r}, poses={self.graph.num_poses}, edges={self.graph.num_edges},"
-            f" rejected={len(self.rejected_edges)} of {loops} loop closures, cost={self.cost:.6g},"
+            f" rejected={len(self.rejected_edges)} of {loops} loop closures,{self._priors_text()} cost={self.cost:.6g},"
             f" stages={len(self.stages)}, iterations={self.iterations}, status={self.status}"
             f" ({self.message!r}), time_s={self.time_s:.3g}, warnings={len(self.warnings)})"
         )
+
+    def _priors_text(self) -> str:
+        """`" rejected_priors=k of K,"` where priors were candidates, else empty (the `repr`)."""
+        if self.prior_candidates is None:
+            return ""
+        return f" rejected_priors={len(self.rejected_priors)} of {int(self.prior_candidates.sum())},"
 
     @property
     def converged(self) -> bool:
