@@ -133,10 +133,9 @@ class RoundProblem:
         self, poses: np.ndarray, inliers: np.ndarray, options: SolverOptions, on_iteration: IterationCallback | None
     ) -> SolverResult:
         """Least squares of the `inliers` `(E,)` edges from `poses` `(N, n, n)`, each step direct."""
-        every_edge = np.ones(len(self.problem.factors.edges), dtype=bool)  # the direct path, zeros included
-        if self.problem.weighted_priors:  # the loss covers the priors; the linear layer trusts them all
-            loss = FixedWeightLoss(self.weights(inliers))
-            return solve_least_squares(self.problem, poses, loss, options, on_iteration, trusted=every_edge)
+        # The direct path, zeros included (priors are always trusted; where they are candidates the
+        # weights cover them too, `Problem.weighted_priors`).
+        every_edge = np.ones(len(self.problem.factors.edges), dtype=bool)
         loss = FixedWeightLoss(self.weights(inliers))
         return solve_least_squares(self.problem, poses, loss, options, on_iteration, trusted=every_edge)
 
