@@ -6,12 +6,17 @@
     python benchmarks/robust.py gnc [--loss gm|tls] [--time-limit 600] [FILE ...]
     python benchmarks/robust.py gtsam-bridge [--data-dir DIR] [--files MIT,...] [--percent 0,30]
         [--no-files] [--no-robots]
+    python benchmarks/robust.py gnss [--files manhattanOlson3500,...] [--loops 0,10,30] [--priors 0,10,20]
+        [--every 10] [--sigma 2] [--seed 1] [--no-gtsam]
 
 - `clean` (`_lib/robust_clean.py`): files without false loops, the default `egnc.solve` against
   `l2`: loops rejected, ATE to the `l2` optimum, both costs, warnings and times.
 - `drifted` (`_lib/robust_drifted.py`): the same files from their own guess and from guesses
   re-chained from odometry with seeded drift; egnc, egnc from its guess only, GTSAM's GNC-TLS and
   LM, each a child process under a time limit: loops rejected and cost over the optimum.
+- `gnss` (`_lib/robust_gnss.py`): GNSS-like position priors with multipath jumps (single and in
+  bursts) and false loops; egnc and GTSAM's GNC-TLS: precision and recall for loops and priors
+  apart, ATE without alignment, time against the clean solve.
 - `gnc` (`_lib/gtsam_gnc.py`): GTSAM's `GncLMOptimizer` on g2o files, each in a child killed at the
   limit: status, final error, loops with weight < 0.5.
 - `gtsam-bridge` (`_lib/gtsam_bridge.py`): `egnc.from_gtsam` on every shared file (cost equal to
@@ -76,6 +81,15 @@ def parser() -> argparse.ArgumentParser:
     bridge.add_argument("--percent", default="0,30", help="false loops added to each file, in %% (0: as given)")
     bridge.add_argument("--no-files", action="store_true", help="only the two-robot table")
     bridge.add_argument("--no-robots", action="store_true", help="only the shared-file table")
+
+    gnss = commands.add_parser("gnss", help="GNSS fixes with multipath outliers and false loops, egnc and GTSAM")
+    gnss.add_argument("--files", default="manhattanOlson3500,sphere2500,city10000")
+    gnss.add_argument("--loops", default="0,10,30", help="false-loop shares, percent")
+    gnss.add_argument("--priors", default="0,10,20", help="multipath shares of the fixes, percent")
+    gnss.add_argument("--every", type=int, default=10, help="a fix every K poses")
+    gnss.add_argument("--sigma", type=float, default=2.0, help="fix noise per coordinate, metres")
+    gnss.add_argument("--seed", type=int, default=1)
+    gnss.add_argument("--no-gtsam", action="store_true")
     return top
 
 
@@ -87,6 +101,11 @@ def main(argv: list[str] | None = None) -> int:
         from _lib import robust_clean
 
         return robust_clean.run(args.data_dir, args.files, args.gtsam_chordal)
+    if args.command == "gnss":
+        from _lib import robust_gnss
+
+        print(command_echo(given))
+        return robust_gnss.run(args)
     if args.command == "drifted":
         from _lib import robust_drifted
 

@@ -204,8 +204,6 @@ def import_times(top: int = 12) -> list[tuple[int, int, str]]:
     return [egnc_total] + sorted((r for r in rows if r[2] != "egnc"), key=lambda r: -r[1])[:top]
 
 
-
-
 def main() -> None:
     """Parse arguments, run every case in a child process, print the markdown table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

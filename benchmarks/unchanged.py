@@ -173,9 +173,7 @@ def compare(args: argparse.Namespace) -> int:
         differ_any |= bool(differ)
         change = max(abs(after[k]["cost"] - before[k]["cost"]) / max(abs(before[k]["cost"]), 1e-300) for k in keys)
         ratio = float(np.median([after[k]["time_s"] / max(before[k]["time_s"], 1e-9) for k in keys]))
-        print(
-            f"| {group} | {len(same)} of {len(keys)} | {', '.join(differ) or '-'} | {change:.1e} | {ratio:.2f}x |"
-        )
+        print(f"| {group} | {len(same)} of {len(keys)} | {', '.join(differ) or '-'} | {change:.1e} | {ratio:.2f}x |")
     missing = [key[1] for key in before if key not in after]
     if missing:
         print(f"\n{len(missing)} cases of {args.before} are not in {args.after}.")

@@ -26,10 +26,13 @@ from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
 from egnc.nonlinear.initialize import initialize_poses
 from egnc.nonlinear.least_squares import STATUS_MESSAGES, IterationCallback, Problem, SolverOptions
 from egnc.nonlinear.marginals import pose_covariances
+from egnc.nonlinear.prior_alignment import align_to_priors
 from egnc.robust.decision import StartContext
+from egnc.robust.factor_set import FactorSet
 from egnc.robust.gnc import (
     GncOptions,
     GncOutcome,
+    KnownInliers,
     StageCallback,
     StageReport,
     StageStart,
@@ -39,7 +42,7 @@ from egnc.robust.gnc import (
     stage_tolerance,
 )
 from egnc.robust.pipeline import Graduate, Search, search_decisions
-from egnc.robust.result import Result, decided_fields, nothing_to_optimize
+from egnc.robust.result import PriorDecision, Result, decided_fields, nothing_to_optimize
 from egnc.robust.schedules import GRADUATED_METHODS, METHODS, make_schedule
 
 __all__ = [
@@ -65,30 +68,41 @@ def initial_guess(graph: PoseGraph, init: str, known_inliers: np.ndarray, linear
             tree when it was read). `"odometry"`: the known-inlier edges composed from the gauge
             pose(s), ignoring the file's other poses. `"chordal"`: `egnc.nonlinear.chordal`, rotations by the
             chordal relaxation then translations, over every edge: independent of odometry drift,
-            but it trusts every loop closure, so false loops distort it (BENCHMARKS.md).
+            but it trusts every loop closure, so false loops distort it (BENCHMARKS.md). With
+            priors and no FIX line, both are moved rigidly onto the priors (a trimmed fit that
+            wrong fixes do not drag, `egnc.nonlinear.prior_alignment`): a map in their frame.
         known_inliers: `(E,)` bool, the edges `"odometry"` composes.
         linear_solver: resolved backend, for `"chordal"`.
     """
     if init == "file":
         return graph.poses
     if init == "chordal":
-        return chordal_initialization(graph, linear_solver=linear_solver)
+        return _in_priors_frame(graph, chordal_initialization(graph, linear_solver=linear_solver))
     if init == "odometry":
         gauge = graph.fixed if graph.fixed.any() else np.arange(graph.num_poses) == 0
         try:
-            return initialize_poses(
+            chained = initialize_poses(
                 graph.dim, graph.edges[known_inliers], graph.measurements[known_inliers], poses=graph.poses, known=gauge
             )
         except GraphError as error:
             raise GraphError(f"init 'odometry': {error}; use init 'file' or 'chordal'") from None
+        return _in_priors_frame(graph, chained)
     raise EgncError(f"unknown init {init!r}: choose one of {', '.join(INITIALIZATIONS)}")
+
+
+def _in_priors_frame(graph: PoseGraph, poses: np.ndarray) -> np.ndarray:
+    """`(N, P)` `poses` moved onto the graph's priors (`egnc.nonlinear.prior_alignment`) where
+    they set the frame: the graph has priors and no pose held by a FIX line."""
+    if not graph.num_priors or graph.fixed.any():
+        return poses
+    return align_to_priors(graph, poses)
 
 
 def solve(
     graph: PoseGraph | str | Path,
     method: str = "egnc",
     *,
-    known_inliers: str | np.ndarray = "odometry",
+    known_inliers: KnownInliers = "odometry",
     init: str = "file",
     linear_solver: str = "auto",
     options: SolverOptions | None = None,
@@ -102,8 +116,12 @@ def solve(
         graph: a `PoseGraph`, or the path of a g2o file to read.
         method: one of `METHODS`: `"egnc"` (default), `"risam"`, `"gnc-gm"`, `"gnc-tls"`,
             `"huber"`, `"cauchy"`, `"gm"` or `"l2"` (plain least squares).
-        known_inliers: edges that stay quadratic: `"odometry"` (consecutive ids, default),
-            `"none"`, or an `(E,)` bool mask.
+        known_inliers: factors that stay quadratic, by kind: `"odometry"` (edges between
+            consecutive ids, default), `"loops"` (the other edges), `"priors"`, several joined
+            (`("odometry", "priors")` or `"odometry,priors"`), or `"none"`; or a bool mask,
+            `(E,)` over the edges or `(E + K,)` over the edges then the priors. Priors not
+            named are candidates for rejection like loop closures (`Result.rejected_priors`),
+            each tested at its own dimension (a position prior's 2 or 3).
         init: the initial guess, one of `INITIALIZATIONS` (`initial_guess`): `"file"` (default:
             on every shared dataset, with or without false loops, it did at least as well as the
             others; `"chordal"` reaches better least-squares minima from a drifted guess but is
@@ -135,11 +153,14 @@ def solve(
         graph = read_g2o(graph)
     known = known_inlier_mask(graph, known_inliers)
     backend = resolve_name(linear_solver)
-    factors = BetweenFactors.from_graph(graph)
+    between = BetweenFactors.from_graph(graph)
     check_representable(graph)
+    known_edges = known[: graph.num_edges]
     if graph.fixed.all():
-        return nothing_to_optimize(graph, method, known, backend, factors, init, started, gnc_options)
-    graph = graph.with_poses(initial_guess(graph, init, known, backend))
+        return nothing_to_optimize(graph, method, known_edges, backend, between, init, started, gnc_options)
+    graph = graph.with_poses(initial_guess(graph, init, known_edges, backend))
+    # Priors that may be rejected join the edges in every per-factor array (egnc.robust.factor_set).
+    factors = FactorSet.from_graph(graph, between) if len(known) > graph.num_edges else between
     context = StartContext(graph, ~known, factors, options, gnc_options, backend, on_stage, on_iteration)
     graduate = _graduation(context, method)
     initial = to_matrices(graph.dim, graph.poses)
@@ -160,10 +181,14 @@ def _result(context: StartContext, method: str, init: str, outcome: GncOutcome, 
     r = factors.whitened_norms(factors.residuals(kept.poses))
     inliers = kept.inliers
     if inliers is None:  # nothing decided: the outlier test at the solution
-        inliers = classify_inliers(r, robust, graph.tangent_dim, gnc_options)
+        inliers = classify_inliers(r, robust, context.dims, gnc_options)
     if method == "l2":  # plain least squares: nothing is rejected
-        inliers = np.ones(graph.num_edges, dtype=bool)
+        inliers = np.ones(len(r), dtype=bool)
     result_poses = from_matrices(graph.dim, kept.poses)
+    priors = PriorDecision.of(factors, r, inliers, robust, gnc_options.outlier_quantile)
+    E = graph.num_edges
+    initial_r, robust_r, r, inliers, robust = initial_r[:E], robust_r[:E], r[:E], inliers[:E], robust[:E]
+    weights, mu = outcome.weights[:E], outcome.mu[:E]
     decided = decided_fields(
         graph,
         result_poses,
@@ -175,15 +200,16 @@ def _result(context: StartContext, method: str, init: str, outcome: GncOutcome, 
         gnc_options,
         start=kept.start,
         settled=kept.settled,
-        disputed=kept.disputed,
+        disputed=None if kept.disputed is None else kept.disputed[:E],
+        priors=priors,
     )
     return Result(
         graph=graph.with_poses(result_poses),
         method=method,
         linear_solver=context.linear_solver,
         residual_norms=r,
-        weights=outcome.weights,
-        mu=outcome.mu,
+        weights=weights,
+        mu=mu,
         known_inliers=~robust,
         inliers=inliers,
         stages=kept.stages,
@@ -194,6 +220,7 @@ def _result(context: StartContext, method: str, init: str, outcome: GncOutcome, 
         robust_residual_norms=robust_r,
         init=init,
         **decided,
+        **({} if priors is None else priors.result_fields()),
     )
 
 
@@ -267,7 +294,7 @@ def _graduation(context: StartContext, method: str) -> Graduate:
         stage_options = replace(options, rel_cost_tol=max(options.rel_cost_tol, stage_tolerance(method, gnc_options)))
 
     def graduate(start_poses: np.ndarray, start: StageStart = "guess") -> GncOutcome:
-        schedule = make_schedule(method, robust, graph.tangent_dim, c=gnc_options.c, threshold=gnc_options.threshold)
+        schedule = make_schedule(method, robust, context.dims, c=gnc_options.c, threshold=gnc_options.threshold)
         return run_gnc(
             graph,
             start_poses,

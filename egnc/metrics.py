@@ -36,8 +36,9 @@ import numpy as np
 from egnc.errors import EgncError
 from egnc.graph import POSE_SIZE
 from egnc.nonlinear.factors import group_of, to_matrices
+from egnc.nonlinear.prior_alignment import rigid_fit
 
-__all__ = ["RelativePoseError", "ate", "precision_recall", "rpe", "success"]
+__all__ = ["RelativePoseError", "ate", "precision_recall", "precision_recall_by_kind", "rpe", "success"]
 
 
 def precision_recall(predicted_outlier: np.ndarray, true_outlier: np.ndarray) -> tuple[float, float]:
@@ -67,47 +68,58 @@ def precision_recall(predicted_outlier: np.ndarray, true_outlier: np.ndarray) ->
     return float(precision), float(recall)
 
 
+def precision_recall_by_kind(
+    rejected_edges: np.ndarray,
+    false_edges: np.ndarray,
+    rejected_priors: np.ndarray | None = None,
+    false_priors: np.ndarray | None = None,
+) -> dict[str, tuple[float, float]]:
+    """`precision_recall` of the loop closures and, where labelled, of the priors, each apart.
+
+    A method that keeps the priors as they are and one that rejects them are scored on the loops
+    alike; a prior decision is not diluted among the loops (or the reverse).
+
+    Args:
+        rejected_edges, false_edges: `(E,)` bool, edges rejected and false ones.
+        rejected_priors, false_priors: `(K,)` bool, priors rejected and false ones (None: no
+            priors' entry; `rejected_priors` None with labels: none rejected).
+
+    Returns:
+        `{"loops": (precision, recall)}`, with `"priors"` where `false_priors` is given.
+    """
+    scores = {"loops": precision_recall(rejected_edges, false_edges)}
+    if false_priors is not None:
+        rejected = np.zeros(len(false_priors), dtype=bool) if rejected_priors is None else rejected_priors
+        scores["priors"] = precision_recall(rejected, false_priors)
+    return scores
+
+
 def success(precision: float, recall: float) -> bool:
     """Whether outlier detection was perfect: precision and recall both exactly 1."""
     return bool(precision == 1.0 and recall == 1.0)
 
 
-def ate(poses: np.ndarray, reference: np.ndarray, dim: int) -> float:
+def ate(poses: np.ndarray, reference: np.ndarray, dim: int, *, align: bool = True) -> float:
     """Absolute trajectory error: position RMSE after the best rigid alignment (no scale).
 
     Args:
         poses: `(N, P)` estimated poses (`P` = 3 in 2D, 7 in 3D).
         reference: `(N, P)` reference poses, same rows.
         dim: 2 or 3.
+        align: False compares the positions as they are: where priors (GNSS fixes) fix the
+            frame, a map that needs an alignment is wrong where it stands.
 
     Returns:
         `sqrt(mean_k |R p_k + t - q_k|^2)` in metres, with `(R, t)` the proper rigid motion
-        (`det R = +1`) that minimizes it.
+        (`det R = +1`) that minimizes it (the identity without `align`).
     """
     p = _positions(poses, dim, "poses")
     q = _positions(reference, dim, "reference")
     if p.shape != q.shape:
         raise EgncError(f"ate: poses has {len(p)} rows but reference has {len(q)}")
-    R, t = _rigid_alignment(p, q)
+    R, t = rigid_fit(p, q) if align else (np.eye(dim), np.zeros(dim))
     error = p @ R.T + t - q
     return float(np.sqrt(np.mean(np.sum(error * error, axis=1))))
-
-
-def _rigid_alignment(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The rotation `(k, k)` and translation `(k,)` minimizing `sum |R p_i + t - q_i|^2`.
-
-    Umeyama (1991) without scale (Kabsch): with the cross-covariance
-    `H = sum (p_i - p_mean) (q_i - q_mean)^T = U S V^T`, `R = V diag(1, ..., 1, det(V U^T)) U^T`;
-    the last sign turns the best orthogonal fit into the best rotation when the former is a
-    reflection.
-    """
-    p_mean, q_mean = p.mean(axis=0), q.mean(axis=0)
-    H = (p - p_mean).T @ (q - q_mean)
-    U, _, Vt = np.linalg.svd(H)
-    signs = np.ones(len(H))
-    signs[-1] = 1.0 if np.linalg.det(Vt.T @ U.T) > 0.0 else -1.0
-    R = (Vt.T * signs) @ U.T
-    return R, q_mean - R @ p_mean
 
 
 @dataclass(frozen=True)

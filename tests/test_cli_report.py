@@ -18,11 +18,11 @@ OUTLIERS = REPO / "datasets" / "grid2d_outliers.g2o"  # rejects loops, so `rejec
 FIELD_ROW = re.compile(r"^\| `([^`]+)` \| ([^|]+) \|", flags=re.MULTILINE)
 
 
-def report_of(tmp_path: Path, *args: str) -> dict[str, Any]:
-    """The report of `egnc-solve OUTLIERS --report ... args` run through a subprocess."""
+def report_of(tmp_path: Path, *args: str, input_path: Path = OUTLIERS) -> dict[str, Any]:
+    """The report of `egnc-solve INPUT --report ... args` run through a subprocess (INPUT: OUTLIERS)."""
     report = tmp_path / "report.json"
     run = subprocess.run(
-        [sys.executable, "-m", "egnc.cli.solve", str(OUTLIERS), "--report", str(report), "-q", *args],
+        [sys.executable, "-m", "egnc.cli.solve", str(input_path), "--report", str(report), "-q", *args],
         capture_output=True,
         text=True,
         stdin=subprocess.DEVNULL,
@@ -38,7 +38,22 @@ def reports(tmp_path_factory) -> dict[str, dict[str, Any]]:
     return {
         "batch": report_of(tmp_path_factory.mktemp("batch")),
         "online": report_of(tmp_path_factory.mktemp("online"), "--online"),
+        "priors": report_of(tmp_path_factory.mktemp("priors"), input_path=gnss_file(tmp_path_factory.mktemp("gnss"))),
     }
+
+
+def gnss_file(folder: Path) -> Path:
+    """OUTLIERS with a position prior every 5th pose, a tenth of them moved by multipath jumps."""
+    import egnc
+    from egnc.datasets import add_multipath_outliers, add_position_priors
+    from egnc.io.g2o import read_g2o, write_g2o
+
+    graph = read_g2o(OUTLIERS)
+    optimum = egnc.solve(graph).graph.poses
+    corrupted = add_multipath_outliers(add_position_priors(graph, optimum, every=5, sigma=1.0), 10, seed=1)
+    path = folder / "gnss.g2o"
+    write_g2o(corrupted.graph, path)
+    return path
 
 
 def documented_fields() -> dict[str, str]:
@@ -77,9 +92,11 @@ def conforms(value: Any, kind: str) -> bool:
 def test_docs_list_exactly_the_fields_of_a_batch_and_an_online_report(reports):
     batch = {path for path, _ in fields(reports["batch"])}
     online = {path for path, _ in fields(reports["online"])}
+    priors = {path for path, _ in fields(reports["priors"])}
     assert "online" not in batch and "online.update_ms.p99" in online
     assert "rejected[].r_robust" in batch and "timings_s.factorize" in batch
-    assert sorted(batch | online) == sorted(documented_fields())
+    assert "rejected_priors" not in batch and reports["priors"]["rejected_priors"]
+    assert sorted(batch | online | priors) == sorted(documented_fields())
 
 
 def test_fields_have_their_documented_types(reports):

@@ -18,6 +18,7 @@ KEY_LINES = {
     "01_solve_g2o.py": "wrote solved.g2o",
     "02_python_api.py": "G2oFormatError at line 2:",
     "03_from_gtsam.py": "ISAM2 on the kept factors:",
+    "04_gnss_priors.py": "wrote gnss.png",
 }
 
 NEEDS = {"03_from_gtsam.py": "gtsam"}
@@ -69,3 +70,11 @@ def test_solve_example_writes_the_input_edges(run_example):
     rejected = re.search(r"^rejected (\d+) of \d+ loop closures, (\d+) of the (\d+) false ones$", process.stdout, re.M)
     assert rejected, process.stdout
     assert rejected[1] == rejected[2] == rejected[3]
+
+
+def test_gnss_example_rejects_exactly_the_moved_fixes(run_example):
+    process, _ = run_example("04_gnss_priors.py")
+    assert process.returncode == 0, process.stderr
+    found = re.search(r"^rejected (\d+) of \d+ fixes, (\d+) of the (\d+) moved ones$", process.stdout, re.M)
+    assert found, process.stdout
+    assert found[1] == found[2] == found[3] != "0"

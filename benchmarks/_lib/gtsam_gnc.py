@@ -60,9 +60,7 @@ def odometry_inliers(loaded: LoadedGraph) -> np.ndarray:
     return np.append(odometry, loaded.prior_index).astype(np.int64)
 
 
-def _gnc_params(
-    kind: GncKind, known_inliers: np.ndarray, base: Literal["default", "tight"]
-) -> gtsam.GncLMParams:
+def _gnc_params(kind: GncKind, known_inliers: np.ndarray, base: Literal["default", "tight"]) -> gtsam.GncLMParams:
     """GNC parameters: GTSAM defaults except the loss, the known inliers and the inner LM."""
     inner = gtsam.LevenbergMarquardtParams() if base == "default" else lm_params()
     params = gtsam.GncLMParams(inner)
@@ -77,9 +75,7 @@ def _gnc_child(conn, path: str, kind: GncKind, known_inliers, base) -> None:
     try:
         loaded = load_g2o(path)
         inliers = odometry_inliers(loaded) if known_inliers is None else np.asarray(known_inliers)
-        optimizer = gtsam.GncLMOptimizer(
-            loaded.graph, loaded.initial, _gnc_params(kind, inliers, base)
-        )
+        optimizer = gtsam.GncLMOptimizer(loaded.graph, loaded.initial, _gnc_params(kind, inliers, base))
         start = time.perf_counter()
         result = optimizer.optimize()
         optimize_time_s = time.perf_counter() - start
@@ -134,9 +130,7 @@ def run_gnc(
     context = multiprocessing.get_context("spawn")
     receiver, sender = context.Pipe(duplex=False)
     start = time.perf_counter()
-    process = context.Process(
-        target=_gnc_child, args=(sender, path_str, kind, inliers, base), daemon=True
-    )
+    process = context.Process(target=_gnc_child, args=(sender, path_str, kind, inliers, base), daemon=True)
     process.start()
     sender.close()  # so a child that dies without sending shows up as EOF
     payload: dict = {}
@@ -182,8 +176,7 @@ def format_gnc_table(results: Sequence[GncResult]) -> str:
     for res in results:
         if res.status != "ok":
             lines.append(
-                f"| {Path(res.path).name} | {res.kind} | {res.status}: {res.message} | | | "
-                f"| | {res.wall_time_s:.1f} |"
+                f"| {Path(res.path).name} | {res.kind} | {res.status}: {res.message} | | | | | {res.wall_time_s:.1f} |"
             )
             continue
         loops = res.edge_keys[:, 1] != res.edge_keys[:, 0] + 1

@@ -241,8 +241,7 @@ def values_to_arrays(values: gtsam.Values, is_3d: bool) -> tuple[np.ndarray, np.
 def format_lm_table(results: Sequence[LmResult | tuple[str, str]]) -> str:
     """Markdown table of LM results; a `(path, reason)` tuple is printed as a skipped row."""
     lines = [
-        "| file | dim | poses | edges | final error | reference | match | iterations "
-        "| read (s) | optimize (s) |",
+        "| file | dim | poses | edges | final error | reference | match | iterations | read (s) | optimize (s) |",
         "|---|---|---:|---:|---:|---:|---|---:|---:|---:|",
     ]
     for item in results:
@@ -293,4 +292,3 @@ def _gtsam_version() -> str:
         return version("gtsam")
     except Exception:  # metadata missing in a source build
         return "unknown"
-

@@ -56,4 +56,3 @@ def solve_file(source: str, target: str, init: str = "file", as_json: bool = Fal
         figures = {"read_s": read - started, "solve_s": solved - read, "write_s": time.perf_counter() - solved}
         print(json.dumps(figures | {"cost": cost, "iterations": optimizer.iterations()}))
     return 0 if np.isfinite(cost) else 1
-

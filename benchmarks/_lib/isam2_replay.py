@@ -137,4 +137,3 @@ def report(file: str, relinearize_threshold: float, relinearize_skip: int, refer
         gtsam.writeG2o(loaded.graph, estimate, output)
     print(json.dumps(row))
     return 0
-

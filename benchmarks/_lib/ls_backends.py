@@ -349,4 +349,3 @@ def run(cases: str, backends: str, repeat: int, budget: float) -> None:
                     f" | {f['residual']:.1e} | {f['peak_mib']:.0f} |",
                     flush=True,
                 )
-

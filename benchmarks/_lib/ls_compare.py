@@ -284,9 +284,9 @@ def format_iterations(profiles: Sequence[IterationProfile]) -> str:
 def environment() -> str:
     """One line: date, machine and library versions."""
     stamp = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    versions = ", ".join(
-        f"{pkg} {version(pkg)}" for pkg in ("egnc", "numpy", "scipy", "scikit-sparse", "gtsam")
-    ) + (f", g2opy {version('g2opy')}" if g2o_available() else "")
+    versions = ", ".join(f"{pkg} {version(pkg)}" for pkg in ("egnc", "numpy", "scipy", "scikit-sparse", "gtsam")) + (
+        f", g2opy {version('g2opy')}" if g2o_available() else ""
+    )
     threads = os.environ.get("OPENBLAS_NUM_THREADS", "unset")
     return (
         f"{stamp}; {_cpu_model()}, {os.cpu_count()} cpus; Python {platform.python_version()}; {versions}; "

@@ -154,4 +154,3 @@ def run(poses: str, dim: int, backends: str, gtsam: bool, runs: int, timeout: fl
                 f" | {f['cost']:.6g} | {f['iterations']} | {'yes' if f['converged'] else 'no'} |{ratios}",
                 flush=True,
             )
-

@@ -199,4 +199,3 @@ def report(args: argparse.Namespace) -> int:
                 with open(args.json, "a", encoding="utf-8") as out:
                     out.write(json.dumps({"dataset": name, "percent": percent, "repeats": args.repeats, **row}) + "\n")
     return 0
-

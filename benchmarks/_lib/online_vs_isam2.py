@@ -207,4 +207,3 @@ def report(args: argparse.Namespace) -> int:
     with open("/proc/loadavg") as load:
         print(f"load average at the end {' '.join(load.read().split()[:3])}", file=sys.stderr)
     return 0
-

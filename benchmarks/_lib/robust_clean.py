@@ -68,4 +68,3 @@ def run(data_dir: Path, files: str, gtsam_chordal: bool) -> int:
             row += f" {gtsam_chordal_cost(path):.7g} |" if graph.dim == 3 else " - |"
         print(row, flush=True)
     return 0
-

@@ -155,4 +155,3 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
     return 0
-

@@ -110,9 +110,7 @@ def run_grid(
                     yield from ((path, float(p), int(s), reference) for p in percents for s in seeds)
                 else:
                     graph = typing.cast(PoseGraph, graphs[path])
-                    corruptions = corrupted_cases(
-                        path.stem, graph, reference, percents, seeds, variant, outlier_rule
-                    )
+                    corruptions = corrupted_cases(path.stem, graph, reference, percents, seeds, variant, outlier_rule)
                     yield from ((path, float(p), int(s), case) for p, s, case in corruptions)
 
         runs = (

@@ -1,4 +1,5 @@
-"""`egnc-corrupt`: add seeded false loop closures to a g2o file (riSAM's protocol).
+"""`egnc-corrupt`: add seeded false loop closures to a g2o file (riSAM's protocol), and GNSS-like
+position priors with multipath outliers (`--gnss-every`).
 
 The clean input is solved with plain least squares (`egnc.solve(..., "l2")`) for the
 outlier-free reference; `egnc.datasets.add_false_loops` draws the false loops against it; the
@@ -15,10 +16,20 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from egnc import __version__
 from egnc.api import solve
-from egnc.datasets import OUTLIER_RULES, VARIANTS, add_false_loops, write_labels
+from egnc.datasets import (
+    OUTLIER_RULES,
+    VARIANTS,
+    add_false_loops,
+    add_multipath_outliers,
+    add_position_priors,
+    write_labels,
+)
 from egnc.errors import EgncError
+from egnc.graph import PoseGraph
 from egnc.io import read_g2o, write_g2o
 from egnc.linalg.linear_solvers import LINEAR_SOLVERS
 
@@ -26,6 +37,8 @@ EXAMPLES = """examples:
   egnc-corrupt datasets/grid2d.g2o --percent 30 --seed 1 -o grid2d_30.g2o
   egnc-corrupt csail.g2o --percent 50 --seed 2 --variant group --group-size 5 -o csail_50_group.g2o
   egnc-corrupt intel.g2o --percent 10 --seed 3 --variant close --close-radius 5 -o intel_close.g2o
+  egnc-corrupt manhattanOlson3500.g2o --percent 10 --seed 4 --gnss-every 10 --gnss-sigma 2 \
+      --gnss-outliers 20 --gnss-bursts -o manhattan_gnss.g2o
 """
 
 
@@ -63,6 +76,21 @@ def build_parser() -> argparse.ArgumentParser:
         default="squared",
         help="a candidate false loop counts when r^2 (default) or, as riSAM's generator, r exceeds chi2.ppf(0.95, d)",
     )
+    gnss = parser.add_argument_group("GNSS-like position priors (egnc.datasets.add_position_priors)")
+    gnss.add_argument("--gnss-every", type=int, metavar="K", help="add a position prior on every K-th pose")
+    gnss.add_argument(
+        "--gnss-sigma", type=float, default=2.0, metavar="S", help="noise per coordinate, metres (default 2)"
+    )
+    gnss.add_argument(
+        "--gnss-outliers",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="share of the fixes moved by multipath jumps of 10-50 m, in [0, 100) (default 0), labelled",
+    )
+    gnss.add_argument(
+        "--gnss-bursts", action="store_true", help="jumps in bursts of 5-20 consecutive fixes (a street canyon)"
+    )
     parser.add_argument("-o", "--output", type=Path, required=True, help="corrupted pose graph to write (.g2o)")
     parser.add_argument(
         "--labels", type=Path, help="labels sidecar to write (default: the output with .labels.json for .g2o)"
@@ -82,6 +110,27 @@ def default_labels_path(output: Path) -> Path:
     """`name.g2o` -> `name.labels.json`; any other name gets `.labels.json` appended."""
     stem = output.name[: -len(".g2o")] if output.suffix == ".g2o" else output.name
     return output.with_name(f"{stem}.labels.json")
+
+
+def _with_gnss(
+    args: argparse.Namespace, graph: PoseGraph, reference: np.ndarray
+) -> tuple[PoseGraph, np.ndarray | None, dict[str, object]]:
+    """`graph` with `--gnss-every` position priors around the `(N, P)` `reference` and their
+    multipath outliers, the priors' labels and metadata; `graph` itself without `--gnss-every`."""
+    if args.gnss_every is None:
+        return graph, None, {}
+    with_priors = add_position_priors(graph, reference, every=args.gnss_every, sigma=args.gnss_sigma, seed=args.seed)
+    moved = add_multipath_outliers(
+        with_priors, args.gnss_outliers, seed=args.seed, bursts=args.gnss_bursts, reference_poses=reference
+    )
+    meta: dict[str, object] = {
+        "gnss_generator": "egnc.datasets.add_position_priors, add_multipath_outliers",
+        "gnss_every": args.gnss_every,
+        "gnss_sigma": args.gnss_sigma,
+        "gnss_outliers": args.gnss_outliers,
+        "gnss_bursts": args.gnss_bursts,
+    }
+    return moved.graph, moved.is_outlier, meta
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -104,7 +153,8 @@ def main(argv: list[str] | None = None) -> int:
             close_radius=args.close_radius,
             outlier_rule=args.outlier_rule,
         )
-        write_g2o(corrupted.graph, args.output)
+        corrupted_graph, prior_outliers, gnss_meta = _with_gnss(args, corrupted.graph, reference.graph.poses)
+        write_g2o(corrupted_graph, args.output)
         written.append(args.output)
         meta = {
             "graph": args.output.name,
@@ -120,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.variant == "close":
             meta["close_radius"] = args.close_radius
         meta["reference"] = f"l2 optimum of {args.input.name} (egnc.solve, linear_solver={args.linear_solver!r})"
-        write_labels(labels_path, corrupted.is_outlier, meta)
+        write_labels(labels_path, corrupted.is_outlier, {**meta, **gnss_meta}, prior_outliers)
     except EgncError as error:
         # A failed run leaves nothing behind: no graph without its labels.
         for path in written:
@@ -133,7 +183,13 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"added {num_false} false loop closures ({args.variant}, seed {args.seed}) to the {num_loops} of "
             f"{args.input.name}: {num_false / (num_false + num_loops):.1%} of loop closures are false\n"
-            f"wrote {args.output} and {labels_path}"
+            + (
+                ""
+                if prior_outliers is None
+                else f"added {len(prior_outliers)} position priors (every {args.gnss_every} poses, sigma"
+                f" {args.gnss_sigma} m), {int(prior_outliers.sum())} of them moved by multipath jumps\n"
+            )
+            + f"wrote {args.output} and {labels_path}"
         )
     return 0
 

@@ -71,7 +71,11 @@ def report_dict(result: Result, warnings: list[str], online: ReplayOutcome | Non
         "timings_s": result.timings,
     }
     if graph.num_priors:  # factor indices count edges and priors in file order (docs/g2o.md)
-        report.update(priors=graph.priors.counts(), rejected_priors=result.rejected_priors.tolist())
+        report.update(
+            priors=graph.priors.counts(),
+            prior_candidates=0 if result.prior_candidates is None else int(result.prior_candidates.sum()),
+            rejected_priors=result.rejected_priors.tolist(),
+        )
     if online is not None:
         report["online"] = _online(online)
     notes = [*warnings, *result.warnings]
@@ -83,18 +87,25 @@ def report_dict(result: Result, warnings: list[str], online: ReplayOutcome | Non
     return report
 
 
+def _rejected_priors_line(result: Result) -> list[str]:
+    """The summary's line on the priors, apart from the loops: none where priors were held quadratic."""
+    if result.prior_candidates is None:
+        return []
+    return [f"rejected {len(result.rejected_priors)} of {int(result.prior_candidates.sum())} priors"]
+
+
 def _rejected(result: Result) -> list[dict[str, Any]]:
     """The report's `rejected` list: each rejected edge with its vertex ids and its residual at both optima."""
     graph = result.graph
     return [
         {
-            "edge": int(k),
+            "edge": int(graph.edge_factor_index[k]),  # the factor index, as in `rejected_edges`
             "i": int(graph.vertex_ids[graph.edges[k, 0]]),
             "j": int(graph.vertex_ids[graph.edges[k, 1]]),
             "r_robust": float(result.robust_residual_norms[k]),
             "r": float(result.residual_norms[k]),
         }
-        for k in result.rejected_edges
+        for k in np.flatnonzero(~result.inliers)
     ]
 
 
@@ -162,11 +173,12 @@ def summary(result: Result, written: list[Path]) -> str:
         f"{', ' + counts_text(graph) if graph.num_priors else ''} ({graph.dim}D)",
         f"method {result.method}, linear solver {result.linear_solver}",
         f"least-squares cost {result.accepted_cost:.10g} over the {int(result.inliers.sum())} accepted edges"
-        f"{f' and {graph.num_priors} priors' if graph.num_priors else ''}"
+        f"{f' and {graph.num_priors - len(result.rejected_priors)} priors' if graph.num_priors else ''}"
         f" ({result.cost:.10g} over all {graph.num_edges} edges, rejected ones included)",
         f"{len(result.stages)} stages, {result.iterations} iterations ({stopped})",
         f"rejected {len(result.rejected_edges)} of {int((~result.known_inliers).sum())} loop closures"
         f" (candidates: edges not known inliers)",
+        *_rejected_priors_line(result),
         f"time {result.time_s:.3f} s",
     ]
     if written:

@@ -44,6 +44,7 @@ from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.online import ONLINE_METHODS, OnlineOptions
 from egnc.online.replay import CHECKPOINT_EVERY, ReplayOutcome, replay, replay_steps
 from egnc.rerun import DEFAULT_VIEWER_URL, OnlineRecorder, StageRecorder, log_result, recording
+from egnc.robust.gnc import KNOWN_INLIER_KINDS, known_inlier_mask
 
 EXIT_NUMERICAL_FAILURE = 3
 """Exit code when the solve fails numerically (documented in docs/cli.md)."""
@@ -109,10 +110,11 @@ def _add_problem_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--known-inliers",
         default="odometry",
-        metavar="{odometry,none,FILE}",
-        help="edges never rejected: odometry (consecutive ids in either direction, default), none, or a FILE of"
-        " edge indices (whitespace separated, # comments) or an egnc labels JSON (every edge it does not list"
-        " as an outlier)",
+        metavar="{KINDS,none,FILE}",
+        help="factors never rejected: kinds joined by commas among odometry (consecutive ids in either"
+        " direction, default), loops and priors (e.g. odometry,priors; priors not named are candidates like"
+        " loop closures), none, or a FILE of edge indices (whitespace separated, # comments) or an egnc"
+        " labels JSON (every edge it does not list as an outlier)",
     )
     parser.add_argument(
         "--information",
@@ -481,10 +483,10 @@ def is_irl(path: Path) -> bool:
 
 
 def _mask(known_inliers: str | np.ndarray, graph: PoseGraph) -> np.ndarray:
-    """`(E,)` bool known-inlier mask from the `--known-inliers` choice."""
+    """`(E,)` bool known-inlier edges from the `--known-inliers` choice."""
     if isinstance(known_inliers, str):
-        return np.zeros(graph.num_edges, dtype=bool) if known_inliers == "none" else graph.is_odometry
-    return known_inliers
+        return known_inlier_mask(graph, known_inliers)[: graph.num_edges]
+    return known_inliers[: graph.num_edges]
 
 
 def _same_path(a: Path, b: Path) -> bool:
@@ -531,8 +533,11 @@ def cholmod_hint(graph: PoseGraph, linear_solver: str, cholesky_installed: bool)
 
 
 def _known_inliers(choice: str, graph: PoseGraph) -> str | np.ndarray:
-    """`--known-inliers`: `odometry`, `none`, or a file read by `egnc.io.edge_roles`."""
-    return choice if choice in ("odometry", "none") else read_known_inliers(choice, graph.num_edges)
+    """`--known-inliers`: kinds joined by commas (`odometry,priors`), `none`, or a file read by `egnc.io.edge_roles`."""
+    kinds = {name.strip() for name in choice.split(",")}
+    if kinds <= {*KNOWN_INLIER_KINDS, "none"}:
+        return choice
+    return read_known_inliers(choice, graph.num_edges)
 
 
 def _require_finite(result: Result, input_path: Path) -> None:

@@ -138,9 +138,7 @@ def add_false_loops(
     reference_poses = np.asarray(reference_poses, dtype=np.float64)
     expected = (graph.num_poses, POSE_SIZE[graph.dim])
     if reference_poses.shape != expected:
-        raise EgncError(
-            f"add_false_loops: reference_poses has shape {reference_poses.shape}, expected {expected}"
-        )
+        raise EgncError(f"add_false_loops: reference_poses has shape {reference_poses.shape}, expected {expected}")
     if not np.all(np.isfinite(reference_poses)):
         raise EgncError("add_false_loops: reference_poses contains NaN or infinite values")
     loops = graph.edges[graph.is_loop_closure]

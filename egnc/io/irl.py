@@ -181,9 +181,7 @@ class IrlLog:
             raise GraphError("IrlLog: ODOMETRY entries cannot have a NULL hypothesis")
         if np.any(self.is_outlier & ~self.has_null):
             raise GraphError("IrlLog: an outlier entry must list the NULL hypothesis it marks as correct")
-        if self.prior is not None and (
-            self.prior.pose.shape != (m,) or self.prior.covariance.shape != (d, d)
-        ):
+        if self.prior is not None and (self.prior.pose.shape != (m,) or self.prior.covariance.shape != (d, d)):
             raise GraphError(f"IrlLog.prior needs a ({m},) pose and a ({d}, {d}) covariance")
         values = [self.measurements.reshape(num_edges, -1), self.covariances.reshape(num_edges, -1)]
         if self.prior is not None:
@@ -284,8 +282,7 @@ def read_irl(path: str | os.PathLike, covariance_order: CovarianceOrder | None =
         lines.pop()
     if len(lines) < HEADER_LINES:
         raise G2oFormatError(
-            f"IRL header needs {HEADER_LINES} lines (name, date, pose dimension, linearity, notes), "
-            f"found {len(lines)}",
+            f"IRL header needs {HEADER_LINES} lines (name, date, pose dimension, linearity, notes), found {len(lines)}",
             path,
         )
     name, date, dim_text, linearity, notes = (line.strip() for line in lines[:HEADER_LINES])

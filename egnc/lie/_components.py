@@ -119,9 +119,7 @@ def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:
     def pick(if_w, if_x, if_y, if_z):
         return np.where(use_w, if_w, np.where(use_x, if_x, np.where(use_y, if_y, if_z)))
 
-    q = np.stack(
-        [pick(dx, tx, sxy, sxz), pick(dy, sxy, ty, syz), pick(dz, sxz, syz, tz), pick(tw, dx, dy, dz)]
-    )
+    q = np.stack([pick(dx, tx, sxy, sxz), pick(dy, sxy, ty, syz), pick(dz, sxz, syz, tz), pick(tw, dx, dy, dz)])
     # The sign flip for qw >= 0 rides along with the normalization.
     q *= np.where(q[3] < 0.0, -1.0, 1.0) / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     return q

@@ -320,9 +320,7 @@ def _lower_block_pattern(num_blocks: int, pairs: np.ndarray) -> sp.csc_matrix:
     indptr = np.zeros(num_blocks + 1, dtype=np.int64)
     np.cumsum(np.bincount(columns, minlength=num_blocks), out=indptr[1:])
     index = np.int32 if len(keys) < 2**31 else np.int64
-    return sp.csc_matrix(
-        (np.ones(len(keys)), rows.astype(index), indptr.astype(index)), shape=(num_blocks, num_blocks)
-    )
+    return sp.csc_matrix((np.ones(len(keys)), rows.astype(index), indptr.astype(index)), shape=(num_blocks, num_blocks))
 
 
 def block_order(name: str, num_blocks: int, block_pairs: np.ndarray) -> np.ndarray:

@@ -24,9 +24,7 @@ from egnc.lie import se2, se3
 _NO_PARENT = -1
 
 
-def spanning_tree(
-    num_poses: int, edges: np.ndarray, roots: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def spanning_tree(num_poses: int, edges: np.ndarray, roots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Grow one breadth-first spanning forest from all `roots` at once.
 
     Args:
@@ -74,9 +72,7 @@ def spanning_tree(
     key_of_edge = edges.min(axis=1) * num_poses + edges.max(axis=1)
     order = np.argsort(key_of_edge, kind="stable")
     children = np.flatnonzero(parent != _NO_PARENT)
-    pair_key = (
-        np.minimum(parent[children], children) * num_poses + np.maximum(parent[children], children)
-    )
+    pair_key = np.minimum(parent[children], children) * num_poses + np.maximum(parent[children], children)
     tree_edge = np.full(num_poses, _NO_PARENT, dtype=np.int64)
     tree_edge[children] = order[np.searchsorted(key_of_edge[order], pair_key)]
     return parent, tree_edge

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Literal, Protocol
 
@@ -222,8 +222,11 @@ class Problem:
         system: the normal equations of every edge (`egnc.linalg.step_solver.WholeSystem`): the layout
             of the unknowns, and the pattern and direct solver, built at first use.
         step_solver: the step solver over `system` (`egnc.linalg.step_solver`).
-        priors: the graph's priors, held quadratic, or None. They enter the linear layer as
-            edges from a fixed virtual pose (row N, `egnc.nonlinear.prior_gauge`).
+        priors: the graph's priors, or None. They enter the linear layer as edges from a fixed
+            virtual pose (row N, `egnc.nonlinear.prior_gauge`).
+        weighted_priors: whether a solve's `EdgeLoss` covers the priors too: it then sees the
+            `(E + K,)` norms of the edges followed by the priors (the robust layer's factor
+            arrays, where priors may be rejected); False holds the priors quadratic.
     """
 
     factors: BetweenFactors
@@ -231,6 +234,7 @@ class Problem:
     system: WholeSystem
     step_solver: StepSolver
     priors: PriorFactors | None = None
+    weighted_priors: bool = False
 
     @property
     def pattern(self) -> NormalEquationsPattern:
@@ -249,13 +253,16 @@ class Problem:
         linear_solver: str = "auto",
         factors: BetweenFactors | None = None,
         fill_reducing: bool = True,
+        weighted_priors: bool = False,
     ) -> Problem:
         """Prepare `graph` for solving (`from_factors`); `factors`: the graph's factors if already
-        built (`BetweenFactors.subset` of a larger graph's)."""
+        built (`BetweenFactors.subset` of a larger graph's); `weighted_priors`: the loss covers
+        the priors (`Problem.weighted_priors`)."""
         priors = PriorFactors.from_priors(graph.priors) if graph.num_priors else None
         fixed = gauge_fixed(graph) if graph.num_priors else graph.fixed
         factors = factors or BetweenFactors.from_graph(graph)
-        return cls.from_factors(factors, fixed, linear_solver, fill_reducing, priors)
+        problem = cls.from_factors(factors, fixed, linear_solver, fill_reducing, priors)
+        return replace(problem, weighted_priors=True) if weighted_priors and priors is not None else problem
 
     @classmethod
     def from_factors(
@@ -412,6 +419,8 @@ class _Run:
         if priors is None:
             return _Point(T, errors, r, float(np.sum(self.loss.cost(r))))
         prior_r = priors.whitened_norms(priors.residuals(T))
+        if self.problem.weighted_priors:
+            return _Point(T, errors, r, float(np.sum(self.loss.cost(np.concatenate((r, prior_r))))), prior_r)
         return _Point(T, errors, r, float(np.sum(self.loss.cost(r)) + 0.5 * np.sum(prior_r**2)), prior_r)
 
     def start(self, T: np.ndarray, errors: EdgeErrors | None) -> None:
@@ -460,12 +469,12 @@ class _Run:
         with self.clock("linearize"):
             linearization = factors.linearize(self.point.T, self.point.errors)  # reuses the residuals
         with self.clock("assemble"):
-            weights = self.loss.weight(self.point.r)
+            weights, prior_weights = self.weights()
             products = edge_products(linearization, factors.information, weights)
             trusted = self.trusted
             if self.problem.priors is not None:  # after the edges, as edges from the virtual pose
                 products, weights, trusted = with_prior_products(
-                    self.problem.priors, self.point.T, products, weights, trusted
+                    self.problem.priors, self.point.T, products, weights, trusted, prior_weights
                 )
             gradient, diagonal = steps.set_system(
                 products, weights, options.linear_method, options.trust_weight, trusted
@@ -480,6 +489,15 @@ class _Run:
             return False
         self.gradient, self.diagonal = gradient, np.clip(diagonal, 1e-6, 1e32)
         return True
+
+    def weights(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """`(E,)` IRLS weights of the edges at the current point, and `(K,)` the priors' where the
+        loss covers them (`Problem.weighted_priors`; None: weight 1)."""
+        point = self.point
+        if not self.problem.weighted_priors or point.prior_r is None:
+            return self.loss.weight(point.r), None
+        weights = self.loss.weight(np.concatenate((point.r, point.prior_r)))
+        return weights[: len(point.r)], weights[len(point.r) :]
 
     def solve_step(self, shift: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
         """The step `-(H + diag(shift))^-1 g`, or None (LM) when it cannot be solved or is not finite.

@@ -131,7 +131,8 @@ class ReachEstimate:
 def covariance_solver(problem: Problem, poses: np.ndarray, weights: np.ndarray | None = None) -> Factorization:
     """The factorization of the information `H` of `problem` at `poses` `(N, n, n)`: `B -> H^-1 B`.
 
-    `weights`: `(E,)` weight of each of `problem`'s edges in `H` (0 leaves an edge out); None: 1.
+    `weights`: `(E,)` weight of each of `problem`'s edges in `H` (0 leaves an edge out), followed
+    by the priors' `(K,)` where its loss covers them (`Problem.weighted_priors`); None: 1.
 
     Raises:
         NotPositiveDefiniteError: `H` cannot be factorized (a degenerate solution).
@@ -142,8 +143,11 @@ def covariance_solver(problem: Problem, poses: np.ndarray, weights: np.ndarray |
     if problem.priors is None:
         data, _ = problem.pattern.assemble(linearization, factors.information, weights)
     else:  # the pattern holds the priors after the edges (`egnc.nonlinear.prior_gauge`)
-        products = edge_products(linearization, factors.information, weights)
-        data, _ = problem.pattern.scatter(with_prior_products(problem.priors, poses, products, weights, None)[0])
+        E = len(factors.edges)
+        prior_weights = weights[E:] if problem.weighted_priors and len(weights) > E else None
+        products = edge_products(linearization, factors.information, weights[:E])
+        with_priors = with_prior_products(problem.priors, poses, products, weights[:E], None, prior_weights)
+        data, _ = problem.pattern.scatter(with_priors[0])
     return problem.linear_solver.factorize(data)
 
 

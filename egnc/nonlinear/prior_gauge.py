@@ -52,13 +52,19 @@ def with_prior_anchor(edges: np.ndarray, fixed: np.ndarray, priors: PriorFactors
 
 
 def with_prior_products(
-    priors: PriorFactors, T: np.ndarray, products: np.ndarray, weights: np.ndarray, trusted: np.ndarray | None
+    priors: PriorFactors,
+    T: np.ndarray,
+    products: np.ndarray,
+    weights: np.ndarray,
+    trusted: np.ndarray | None,
+    prior_weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The edges' normal-equation products `(E, 2d, 2d + 1)`, weights `(E,)` and trusted mask
-    followed by the priors' at poses `T` `(N, n, n)` (weight 1, trusted): the rows of the system
-    `with_prior_anchor` lays out."""
-    ones = np.ones(len(priors))
-    prior_products = edge_products(priors.linearize(T), priors.information, ones)
+    followed by the priors' at poses `T` `(N, n, n)`: the rows of the system `with_prior_anchor`
+    lays out. `prior_weights`: `(K,)` the priors' IRLS weights (None: 1, held quadratic); a
+    given `trusted` mask trusts every prior."""
+    prior_weights = np.ones(len(priors)) if prior_weights is None else prior_weights
+    prior_products = edge_products(priors.linearize(T), priors.information, prior_weights)
     if trusted is not None:
         trusted = np.concatenate((trusted, np.ones(len(priors), dtype=bool)))
-    return np.concatenate((products, prior_products)), np.concatenate((weights, ones)), trusted
+    return np.concatenate((products, prior_products)), np.concatenate((weights, prior_weights)), trusted

@@ -258,7 +258,8 @@ def replay(
         GraphError: edges no edge connects to the gauge pose (`replay_plan`).
     """
     check_instance("graph", graph, PoseGraph)
-    known = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)
+    # The replay adds edges; the edges' part of the mask (a graph's priors are not replayed as candidates).
+    known = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)[: graph.num_edges]
     _check_arguments(graph, checkpoint, checkpoint_every, stop_after, on_step)
     check_callable("on_update", on_update)
     steps = replay_plan(graph, known)

@@ -21,7 +21,7 @@ from egnc.robust.gnc import GncOptions
 from egnc.robust.kernels import chi2_quantile
 
 
-def truncated_cost(r: np.ndarray, robust: np.ndarray, d: int, quantile: float) -> float:
+def truncated_cost(r: np.ndarray, robust: np.ndarray, d: int | np.ndarray, quantile: float) -> float:
     """Truncated least-squares cost `0.5 (sum_known r^2 + sum_loops min(r^2, chi2.ppf(q, d)))`.
 
     The cost a classification pays under the outlier test: an accepted loop its squared residual,
@@ -31,11 +31,14 @@ def truncated_cost(r: np.ndarray, robust: np.ndarray, d: int, quantile: float) -
     Args:
         r: `(E,)` whitened residual norms.
         robust: `(E,)` bool, the loop closures (truncated); the other edges are quadratic.
-        d: residual dimension.
+        d: residual dimension, or `(E,)` per factor (`egnc.robust.factor_set`).
         quantile: `q` of the outlier test (`GncOptions.outlier_quantile`).
     """
     r2 = r * r
-    return 0.5 * float(np.sum(r2[~robust]) + np.sum(np.minimum(r2[robust], chi2_quantile(quantile, d))))
+    threshold = chi2_quantile(quantile, d)
+    if np.ndim(threshold):
+        threshold = threshold[robust]
+    return 0.5 * float(np.sum(r2[~robust]) + np.sum(np.minimum(r2[robust], threshold)))
 
 
 def lower_by_more_than_rounding(candidate: float, incumbent: float) -> bool:

@@ -34,9 +34,10 @@ import numpy as np
 from egnc.errors import SolverError
 from egnc.graph import PoseGraph
 from egnc.nonlinear.chordal import chordal_initialization
-from egnc.nonlinear.factors import BetweenFactors, to_matrices
+from egnc.nonlinear.factors import to_matrices
 from egnc.nonlinear.least_squares import IterationCallback, SolverOptions
 from egnc.robust.costs import lower_by_more_than_rounding, readmit_quantile, truncated_cost
+from egnc.robust.factor_set import Factors, FactorSet, factor_dims
 from egnc.robust.gnc import GncOptions, StageCallback, StageStart
 from egnc.robust.readmission import (
     READMIT_BATCH,
@@ -88,8 +89,9 @@ class StartContext:
 
     Attributes:
         graph: the pose graph.
-        robust: `(E,)` bool, the loop closures that may be rejected.
-        factors: the graph's factors.
+        robust: `(F,)` bool, the factors that may be rejected: loop closures, and priors where
+            `factors` is a `FactorSet` (`(E + K,)`, edges then priors).
+        factors: the graph's factors (`egnc.robust.factor_set`).
         solver_options: options of each least-squares solve.
         gnc_options: outlier test and readmission options.
         linear_solver: resolved backend name.
@@ -98,7 +100,7 @@ class StartContext:
 
     graph: PoseGraph
     robust: np.ndarray
-    factors: BetweenFactors
+    factors: Factors
     solver_options: SolverOptions
     gnc_options: GncOptions
     linear_solver: str
@@ -117,7 +119,17 @@ class StartContext:
     def cost_at(self, poses: np.ndarray) -> float:
         """`truncated_cost` of the graph at `poses` `(N, n, n)`, at the outlier test's quantile."""
         r = self.factors.whitened_norms(self.factors.residuals(poses))
-        return truncated_cost(r, self.robust, self.graph.tangent_dim, self.gnc_options.outlier_quantile)
+        return truncated_cost(r, self.robust, self.dims, self.gnc_options.outlier_quantile)
+
+    @property
+    def dims(self) -> int | np.ndarray:
+        """The chi-square tests' dimension: `d`, or `(E + K,)` per factor (`egnc.robust.factor_set`)."""
+        return factor_dims(self.graph, self.factors)
+
+    @property
+    def with_priors(self) -> bool:
+        """Whether priors are candidates: the per-factor arrays are `(E + K,)`, edges then priors."""
+        return isinstance(self.factors, FactorSet)
 
     def decide(self, poses: np.ndarray, inliers: np.ndarray, start: StageStart) -> Decision:
         """`decide_outliers` from `poses` `(N, n, n)` and the first classification `inliers` `(E,)`."""

@@ -57,6 +57,7 @@ from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, Problem, solve_least_squares
 from egnc.nonlinear.marginals import relative_covariances
 from egnc.robust.decision import Decision, StartContext, least_squares_report, map_credit, readmit_quantile
+from egnc.robust.factor_set import edge_factors
 from egnc.robust.gnc import GncOptions, StageReport, announce_stage
 from egnc.robust.kernels import chi2_quantile
 
@@ -140,7 +141,8 @@ def elimination_decision(context: StartContext, to_beat: Decision) -> tuple[Deci
         early (nothing undecided, over budget, no chordal map, a failed solve, past the step
         bound), and the reports of every solve run here.
     """
-    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
+    graph, robust, gnc_options = context.graph, context.robust, context.gnc_options
+    factors = edge_factors(context.factors)  # a start of loop closures alone (egnc.robust.pipeline)
     d, q = graph.tangent_dim, gnc_options.outlier_quantile
     threshold = chi2_quantile(q, d)
     max_steps = int(2.0 * to_beat.truncated_cost / threshold)

@@ -25,18 +25,17 @@ from typing import Literal
 
 import numpy as np
 
-from egnc.errors import EgncError, OptionError, OptionTypeError
+from egnc.errors import OptionError, OptionTypeError
 from egnc.graph import PoseGraph
 from egnc.graph.checks import check_bool, check_choice, check_float, check_int
-from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import (
     NUMERICAL_FAILURE,
     IterationCallback,
-    Problem,
     SolverOptions,
     SolverResult,
     solve_least_squares,
 )
+from egnc.robust.factor_set import Factors, factor_problem
 from egnc.robust.losses import FixedWeightLoss, KernelLoss
 from egnc.robust.schedules import FIXED_LAST_STAGE_METHODS, Schedule, Stage, ThresholdConvention, exceeds
 
@@ -338,21 +337,68 @@ class GncOutcome:
     timings: dict[str, float]
 
 
-def known_inlier_mask(graph: PoseGraph, known_inliers: str | np.ndarray) -> np.ndarray:
-    """`(E,)` bool of edges kept quadratic: `"odometry"`, `"none"`, or an explicit `(E,)` mask."""
-    if isinstance(known_inliers, str):
-        if known_inliers == "odometry":
-            return graph.is_odometry
-        if known_inliers == "none":
-            return np.zeros(graph.num_edges, dtype=bool)
-        raise EgncError(f"unknown known_inliers {known_inliers!r}: choose 'odometry', 'none' or an (E,) bool mask")
+KNOWN_INLIER_KINDS = ("odometry", "loops", "priors")
+"""The kinds of factor `known_inliers` names: edges between consecutive ids, the other edges
+(loop closures), and the priors (`egnc.graph.priors`)."""
+
+KnownInliers = str | Sequence[str] | np.ndarray
+"""Which factors stay quadratic: kinds (`KNOWN_INLIER_KINDS`, or `"none"`) or a bool mask."""
+
+
+def known_inlier_mask(graph: PoseGraph, known_inliers: KnownInliers) -> np.ndarray:
+    """`(E,)` bool of edges kept quadratic, or `(E + K,)` edges then priors when the graph has
+    priors that may be rejected (`egnc.robust.factor_set`).
+
+    Args:
+        graph: the pose graph.
+        known_inliers: kinds of factor held quadratic, one of `KNOWN_INLIER_KINDS` or several
+            (a tuple, or one string joined by commas: `"odometry,priors"`), or `"none"`; or a
+            bool mask, `(E,)` over the edges (priors are then candidates) or `(E + K,)` over the
+            edges then the priors. Priors not named are candidates, like loop closures.
+
+    Raises:
+        OptionError: an unknown kind, or a mask of the wrong type or shape.
+    """
+    if isinstance(known_inliers, str) or (
+        isinstance(known_inliers, (tuple, list)) and all(isinstance(kind, str) for kind in known_inliers)
+    ):
+        kinds = _kinds(known_inliers)  # type: ignore[arg-type]
+        edges = np.zeros(graph.num_edges, dtype=bool)
+        if "odometry" in kinds:
+            edges |= graph.is_odometry
+        if "loops" in kinds:
+            edges |= ~graph.is_odometry
+        if not graph.num_priors or "priors" in kinds:
+            return edges
+        return np.concatenate((edges, np.zeros(graph.num_priors, dtype=bool)))
     try:
         mask = np.asarray(known_inliers)
     except ValueError:  # ragged nesting
         mask = np.asarray(None)
-    if mask.dtype != bool or mask.shape != (graph.num_edges,):
-        raise EgncError(f"known_inliers mask must be bool of shape ({graph.num_edges},), got {mask.dtype} {mask.shape}")
+    sizes = (graph.num_edges,) if not graph.num_priors else (graph.num_edges, graph.num_edges + graph.num_priors)
+    if mask.dtype != bool or mask.ndim != 1 or len(mask) not in sizes:
+        shapes = " or ".join(f"({size},)" for size in sizes)
+        raise OptionError(f"known_inliers mask must be bool of shape {shapes}, got {mask.dtype} {mask.shape}")
+    if graph.num_priors and len(mask) == graph.num_edges:
+        return np.concatenate((mask, np.zeros(graph.num_priors, dtype=bool)))
+    if graph.num_priors and mask[graph.num_edges :].all():  # every prior known: the edges' arrays alone
+        return mask[: graph.num_edges].copy()
     return mask
+
+
+def _kinds(known_inliers: str | Sequence[str]) -> set[str]:
+    """The kinds named by `known_inliers` (`known_inlier_mask`), checked."""
+    names = known_inliers.split(",") if isinstance(known_inliers, str) else list(known_inliers)
+    kinds = {name.strip() for name in names}
+    if kinds == {"none"}:
+        return set()
+    unknown = sorted(kinds - set(KNOWN_INLIER_KINDS))
+    if unknown:
+        raise OptionError(
+            f"unknown known_inliers {unknown[0]!r}: choose kinds among {', '.join(KNOWN_INLIER_KINDS)},"
+            " 'none', or a bool mask"
+        )
+    return kinds
 
 
 def _mu_stats(stage: Stage, robust: np.ndarray) -> tuple[float, float, float]:
@@ -370,7 +416,7 @@ def run_gnc(
     solver_options: SolverOptions,
     gnc_options: GncOptions,
     linear_solver: str,
-    factors: BetweenFactors,
+    factors: Factors,
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
     start: StageStart = "guess",
@@ -381,16 +427,17 @@ def run_gnc(
         graph: the pose graph.
         initial_poses: `(N, n, n)` starting poses.
         schedule: decides each stage's loss.
-        robust: `(E,)` bool, edges the schedule's kernel applies to.
+        robust: `(F,)` bool, factors the schedule's kernel applies to.
         solver_options: options of each stage's GN/LM solve.
         gnc_options: stage limit and stage protocol (`warm_start`).
         linear_solver: resolved backend name, `"cholmod"`, `"rslab"` or `"scipy"`.
-        factors: the graph's factors, built once per solve.
+        factors: the graph's factors, built once per solve: the edges', or the edges' then the
+            priors' where priors are candidates (`egnc.robust.factor_set`).
         on_stage: called with each `StageReport` as soon as its stage ends (progress display).
         on_iteration: called with `(iterations, cost)` after each accepted step of a stage.
         start: the start the stages' reports belong to (`StageReport.start`).
     """
-    problem = Problem.from_graph(graph, linear_solver, factors)
+    problem = factor_problem(graph, factors, linear_solver)
     poses = initial_poses
     r = factors.whitened_norms(factors.residuals(poses))
     last = schedule.first_stage(r)
@@ -466,8 +513,9 @@ def _same_loss(stage: Stage, previous: Stage) -> bool:
     return False
 
 
-def classify_inliers(r: np.ndarray, robust: np.ndarray, d: int, options: GncOptions) -> np.ndarray:
-    """`(E,)` bool inlier flags: robust edges above the chi-square `outlier_quantile` are outliers.
+def classify_inliers(r: np.ndarray, robust: np.ndarray, d: int | np.ndarray, options: GncOptions) -> np.ndarray:
+    """`(E,)` bool inlier flags: robust edges above the chi-square `outlier_quantile` are outliers
+    (`d`: the dimension, or `(E,)` per factor, `egnc.robust.factor_set`).
 
     With `options.outlier_threshold == "squared"` (default) the test is `r^2 > chi2.ppf(q, d)`
     (DESIGN.md section 4); with `"distance"` it is `r > chi2.ppf(q, d)`, as in the authors' C++

@@ -53,6 +53,7 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -103,8 +104,15 @@ CHI2_QUANTILES: Mapping[tuple[float, int], float] = MappingProxyType(
 (tests/test_kernels.py): a least-squares solve then never imports `scipy.special` (30-60 ms)."""
 
 
-def chi2_quantile(quantile: float, d: int) -> float:
-    """`chi2.ppf(quantile, d)`: `CHI2_QUANTILES`, else `scipy.special` (importing `scipy.stats` costs 0.5 s)."""
+def chi2_quantile(quantile: float, d: Any) -> Any:
+    """`chi2.ppf(quantile, d)`: `CHI2_QUANTILES`, else `scipy.special` (importing `scipy.stats` costs 0.5 s).
+
+    `d` an int gives a float; `d` an array of factor dimensions `(F,)` gives `(F,)` thresholds
+    (factors of mixed dimension, `egnc.robust.factor_set`).
+    """
+    if np.ndim(d):
+        dims, inverse = np.unique(np.asarray(d), return_inverse=True)
+        return np.array([chi2_quantile(quantile, int(m)) for m in dims])[inverse.reshape(-1)]
     tabulated = CHI2_QUANTILES.get((quantile, d))
     if tabulated is not None:
         return tabulated
@@ -153,9 +161,7 @@ def make_kernel(name: str, **params: float) -> Kernel:
         signature.bind(**params)
     except TypeError:
         valid = ", ".join(signature.parameters) or "none"
-        raise EgncError(
-            f"kernel {name!r} got parameters {sorted(params)}; valid parameters: {valid}"
-        ) from None
+        raise EgncError(f"kernel {name!r} got parameters {sorted(params)}; valid parameters: {valid}") from None
     return builder(**params)
 
 

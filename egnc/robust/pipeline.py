@@ -29,6 +29,10 @@ where it does not apply) and the reports of the solves it ran. `STARTS` holds th
 - `"parts"` (`egnc.robust.parts`): where the known inliers fall into parts (two robots), one
   decision per group of agreeing loops between them, that group alone accepted between the parts.
 
+Where priors are candidates (`egnc.robust.factor_set`) only the guess decides: the other starts
+rebuild maps from the loop closures alone (chordal maps, runs of loops, backward elimination
+over loops) and do not yet weigh priors.
+
 Each start after the guess tries to beat the best decision so far (`Search.best`); a decision
 replaces the kept one only when lower by more than rounding
 (`egnc.robust.costs.lower_by_more_than_rounding`), candidates visited in the order they were
@@ -107,7 +111,7 @@ class Search:
             return None, outcome.stages
         context = self.context
         r = context.factors.whitened_norms(context.factors.residuals(outcome.poses))
-        inliers = classify_inliers(r, context.robust, context.graph.tangent_dim, context.gnc_options)
+        inliers = classify_inliers(r, context.robust, context.dims, context.gnc_options)
         decision = context.decide(outcome.poses, inliers, start)
         return decision, (*outcome.stages, *decision.reports)
 
@@ -300,6 +304,8 @@ def search_decisions(context: StartContext, initial: np.ndarray, graduate: Gradu
         names: the starts to run, `"runs"` first if given.
     """
     search = Search(context, initial, graduate)
+    if context.with_priors:  # the other starts decide on loop closures alone (module docstring)
+        names = ()
     pipeline = [STARTS[name] for name in names]
     if pipeline[:1] == [STARTS["runs"]]:
         pipeline.insert(1, GUESS)

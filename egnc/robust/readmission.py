@@ -40,6 +40,7 @@ from egnc.linalg.linear_solvers import Factorization, NotPositiveDefiniteError
 from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import Problem
 from egnc.nonlinear.marginals import ReachEstimate, covariance_solver, innovations
+from egnc.robust.factor_set import FactorSet
 from egnc.robust.kernels import chi2_quantile
 
 READMIT_BATCH = 64
@@ -118,6 +119,23 @@ def readmitted(
     except NotPositiveDefiniteError:  # no covariance at a degenerate solution: nothing to test against
         pass
     return passed
+
+
+def readmitted_priors(factors: FactorSet, rejected: np.ndarray, r: np.ndarray, quantile: float) -> np.ndarray:
+    """`(K,)` bool: the rejected priors the map of the accepted factors fits, `r^2 <= chi2.ppf(q, d_k)`.
+
+    A prior's innovation statistic is at most its `r^2` (its covariance adds the map's
+    uncertainty of the pose to the prior's own), so this admits only what the full test would;
+    a prior just outside the threshold, which the map's own uncertainty would excuse, stays out.
+
+    Args:
+        factors: the edges' and the priors' factors.
+        rejected: `(E + K,)` bool, the factors left out of the round.
+        r: `(E + K,)` whitened residual norms at the round's solution.
+        quantile: chi-square quantile of the test.
+    """
+    threshold = chi2_quantile(quantile, factors.priors_of(factors.dims))
+    return factors.priors_of(rejected) & (factors.priors_of(r) ** 2 <= threshold)
 
 
 def _all_agree(

@@ -46,6 +46,7 @@ import numpy as np
 from egnc.graph.connectivity import connected_components
 from egnc.nonlinear.factors import BetweenFactors, group_of
 from egnc.robust.decision import Decision, StartContext, readmit_quantile
+from egnc.robust.factor_set import edge_factors
 from egnc.robust.gnc import StageReport, classify_inliers
 from egnc.robust.kernels import chi2_quantile
 
@@ -129,7 +130,9 @@ def _runs_at(context: StartContext, loops: np.ndarray, poses: np.ndarray) -> tup
     `in_run` is true where a loop's run has at least `MIN_RUN` loops.
     """
     quantile = readmit_quantile(context.gnc_options, context.robust)
-    labels = loop_runs(context.factors.subset(loops), poses, chi2_quantile(quantile, context.graph.tangent_dim))
+    labels = loop_runs(
+        edge_factors(context.factors).subset(loops), poses, chi2_quantile(quantile, context.graph.tangent_dim)
+    )
     return labels, np.bincount(labels, minlength=1)[labels] >= MIN_RUN
 
 

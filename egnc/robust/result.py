@@ -14,10 +14,19 @@ from egnc.nonlinear.least_squares import NOTHING_TO_OPTIMIZE, STATUS_MESSAGES
 from egnc.nonlinear.prior_factors import prior_cost
 from egnc.robust.costs import truncated_cost
 from egnc.robust.diagnostics import solve_warnings
+from egnc.robust.factor_set import Factors, FactorSet
 from egnc.robust.gnc import GncOptions, StageReport, classify_inliers, iteration_limited
 from egnc.robust.parts import part_group_warning
 
-__all__ = ["DecidedFields", "Result", "ResultCosts", "decided_fields", "nothing_to_optimize", "result_costs"]
+__all__ = [
+    "DecidedFields",
+    "PriorDecision",
+    "Result",
+    "ResultCosts",
+    "decided_fields",
+    "nothing_to_optimize",
+    "result_costs",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +78,11 @@ class Result:
             (a stage stopped at its iteration limit, most loop closures rejected, ...).
         settled: whether the kept decision's rounds reached a classification that no longer
             changed (`egnc.robust.decision.Decision.settled`); True where no decision was made.
+        prior_residual_norms: `(K,)` whitened residual norms of the priors at the solution,
+            where priors were candidates for rejection (`egnc.robust.factor_set`); else None.
+        prior_inliers: `(K,)` bool, false for the priors rejected as outliers (tested at their own
+            dimension: `r^2 > chi2.ppf(q, d_k)`); None where priors were held quadratic.
+        prior_candidates: `(K,)` bool, the priors that could be rejected; None where none could.
     """
 
     graph: PoseGraph
@@ -94,15 +108,24 @@ class Result:
     init: str = "file"
     start: str = "guess"
     settled: bool = True
+    prior_residual_norms: np.ndarray | None = None
+    prior_inliers: np.ndarray | None = None
+    prior_candidates: np.ndarray | None = None
 
     def __repr__(self) -> str:
         loops = int(np.count_nonzero(~self.known_inliers))
         return (
             f"Result(method={self.method!r}, poses={self.graph.num_poses}, edges={self.graph.num_edges},"
-            f" rejected={len(self.rejected_edges)} of {loops} loop closures, cost={self.cost:.6g},"
+            f" rejected={len(self.rejected_edges)} of {loops} loop closures,{self._priors_text()} cost={self.cost:.6g},"
             f" stages={len(self.stages)}, iterations={self.iterations}, status={self.status}"
             f" ({self.message!r}), time_s={self.time_s:.3g}, warnings={len(self.warnings)})"
         )
+
+    def _priors_text(self) -> str:
+        """`" rejected_priors=k of K,"` where priors were candidates, else empty (the `repr`)."""
+        if self.prior_candidates is None:
+            return ""
+        return f" rejected_priors={len(self.rejected_priors)} of {int(self.prior_candidates.sum())},"
 
     @property
     def converged(self) -> bool:
@@ -117,8 +140,50 @@ class Result:
 
     @property
     def rejected_priors(self) -> np.ndarray:
-        """0-based factor indices of the priors rejected as outliers: none, priors are held as known inliers."""
-        return np.zeros(0, dtype=np.int64)
+        """0-based factor indices (`PoseGraph.prior_factor_index`) of the priors rejected as
+        outliers; empty where the priors were known inliers (`egnc.solve(known_inliers=...)`)."""
+        if self.prior_inliers is None:
+            return np.zeros(0, dtype=np.int64)
+        return self.graph.prior_factor_index[~self.prior_inliers]
+
+
+@dataclass(frozen=True, eq=False)
+class PriorDecision:
+    """The decision on priors that were candidates for rejection (`egnc.robust.factor_set`).
+
+    Attributes:
+        residual_norms: `(K,)` whitened residual norms at the solution.
+        inliers: `(K,)` bool, the accepted priors.
+        candidates: `(K,)` bool, the priors that could be rejected.
+        costs: the priors' shares of `Result.accepted_cost` (accepted priors' `r^2 / 2`) and of
+            `Result.truncated_cost` (a rejected prior pays `chi2.ppf(q, d_k) / 2`).
+    """
+
+    residual_norms: np.ndarray
+    inliers: np.ndarray
+    candidates: np.ndarray
+    costs: tuple[float, float]
+
+    @classmethod
+    def of(
+        cls, factors: Factors, r: np.ndarray, inliers: np.ndarray, robust: np.ndarray, quantile: float
+    ) -> PriorDecision | None:
+        """The priors' part of the `(F,)` per-factor `r`, `inliers` and `robust` (candidates) at
+        the outlier test's `quantile`; None where `factors` holds no priors."""
+        if not isinstance(factors, FactorSet):
+            return None
+        r_p, inliers_p, robust_p = factors.priors_of(r), factors.priors_of(inliers), factors.priors_of(robust)
+        accepted = 0.5 * float(np.sum(r_p[inliers_p] ** 2))
+        truncated = truncated_cost(r_p, robust_p, factors.priors_of(factors.dims), quantile)
+        return cls(r_p, inliers_p.copy(), robust_p.copy(), (accepted, truncated))
+
+    def result_fields(self) -> dict[str, np.ndarray]:
+        """The `Result` fields of the priors' decision."""
+        return {
+            "prior_residual_norms": self.residual_norms,
+            "prior_inliers": self.inliers,
+            "prior_candidates": self.candidates,
+        }
 
 
 class ResultCosts(TypedDict):
@@ -172,6 +237,7 @@ def decided_fields(
     start: str,
     settled: bool,
     disputed: np.ndarray | None,
+    priors: PriorDecision | None = None,
 ) -> DecidedFields:
     """Costs, iteration count, warnings, start and settledness of a `Result`.
 
@@ -185,11 +251,12 @@ def decided_fields(
         gnc_options: the outlier test's options.
         start, settled, disputed: the kept decision's start, whether it settled, and the loops the
             other starts' decisions accepted where it rejects (None when only one start decided).
+        priors: the decision on the priors where they were candidates; None: held quadratic.
     """
     d = graph.tangent_dim
     initial_fits = classify_inliers(initial_r, robust, d, gnc_options)
     # The priors' cost (held quadratic in this release: never rejected) is part of every cost field.
-    priors = (prior_cost(graph.priors, graph.poses), prior_cost(graph.priors, result_poses))
+    prior_costs = (prior_cost(graph.priors, graph.poses), prior_cost(graph.priors, result_poses))
     warnings = solve_warnings(
         graph,
         stages,
@@ -202,18 +269,19 @@ def decided_fields(
         start=start,
         settled=settled,
         disputed=disputed,
-        prior_costs=priors,
+        prior_costs=prior_costs,
     )
     quantile = gnc_options.outlier_quantile
     parts = part_group_warning(graph, robust, inliers, to_matrices(graph.dim, result_poses), quantile)
     warnings += () if parts is None else (parts,)
     costs = result_costs(initial_r, r, inliers, robust, d, quantile)
     if graph.num_priors:
+        accepted, truncated = (prior_costs[1], prior_costs[1]) if priors is None else priors.costs
         costs = ResultCosts(
-            initial_cost=costs["initial_cost"] + priors[0],
-            cost=costs["cost"] + priors[1],
-            accepted_cost=costs["accepted_cost"] + priors[1],
-            truncated_cost=costs["truncated_cost"] + priors[1],
+            initial_cost=costs["initial_cost"] + prior_costs[0],
+            cost=costs["cost"] + prior_costs[1],
+            accepted_cost=costs["accepted_cost"] + accepted,
+            truncated_cost=costs["truncated_cost"] + truncated,
         )
     return DecidedFields(
         **costs,

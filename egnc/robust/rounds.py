@@ -45,7 +45,6 @@ import numpy as np
 from egnc.graph import PoseGraph
 from egnc.graph.connectivity import connected_components
 from egnc.linalg.linear_solvers import Factorization
-from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import (
     NUMERICAL_FAILURE,
     IterationCallback,
@@ -56,6 +55,7 @@ from egnc.nonlinear.least_squares import (
 )
 from egnc.nonlinear.marginals import ReachEstimate
 from egnc.robust.costs import readmit_quantile, truncated_cost
+from egnc.robust.factor_set import Factors, FactorSet, edge_factors, factor_dims, factor_problem
 from egnc.robust.gnc import (
     GncOptions,
     StageCallback,
@@ -67,7 +67,7 @@ from egnc.robust.gnc import (
 )
 from egnc.robust.kernels import chi2_quantile
 from egnc.robust.losses import FixedWeightLoss
-from egnc.robust.readmission import readmitted, statistic_floor
+from egnc.robust.readmission import readmitted, readmitted_priors, statistic_floor
 
 MAX_ROUNDS = 5
 """Refine-and-decide rounds before the classification is taken as it stands."""
@@ -123,10 +123,10 @@ class RoundProblem:
         return ReachEstimate.of(self.problem)
 
     @classmethod
-    def over(cls, graph: PoseGraph, factors: BetweenFactors, edges: np.ndarray, linear_solver: str) -> RoundProblem:
-        """The problem over the `edges` `(E,)` of `graph` (whose factors are `factors`)."""
+    def over(cls, graph: PoseGraph, factors: Factors, edges: np.ndarray, linear_solver: str) -> RoundProblem:
+        """The problem over the factors `edges` `(F,)` of `graph` (whose factors are `factors`)."""
         edges = edges.copy()
-        return cls(edges, Problem.from_graph(graph.subgraph_edges(edges), linear_solver, factors.subset(edges)))
+        return cls(edges, factor_problem(graph, factors, linear_solver, edges))
 
     def serves(self, inliers: np.ndarray, exactly: bool) -> bool:
         """Whether a round that accepts `inliers` `(E,)` is solved on this problem: its edges hold
@@ -134,14 +134,16 @@ class RoundProblem:
         return np.array_equal(inliers, self.edges) if exactly else not np.any(inliers & ~self.edges)
 
     def weights(self, inliers: np.ndarray) -> np.ndarray:
-        """`(E_problem,)` weight of each of the problem's edges: 1 where `inliers` `(E,)`, else 0."""
+        """`(F_problem,)` weight of each of the problem's factors: 1 where `inliers` `(F,)`, else 0."""
         return inliers[self.edges].astype(np.float64)
 
     def solve(
         self, poses: np.ndarray, inliers: np.ndarray, options: SolverOptions, on_iteration: IterationCallback | None
     ) -> SolverResult:
         """Least squares of the `inliers` `(E,)` edges from `poses` `(N, n, n)`, each step direct."""
-        every_edge = np.ones(len(self.problem.factors.edges), dtype=bool)  # the direct path, zeros included
+        # The direct path, zeros included (priors are always trusted; where they are candidates the
+        # weights cover them too, `Problem.weighted_priors`).
+        every_edge = np.ones(len(self.problem.factors.edges), dtype=bool)
         loss = FixedWeightLoss(self.weights(inliers))
         return solve_least_squares(self.problem, poses, loss, options, on_iteration, trusted=every_edge)
 
@@ -219,7 +221,7 @@ class _Rounds:
         solver_options: SolverOptions,
         gnc_options: GncOptions,
         linear_solver: str,
-        factors: BetweenFactors,
+        factors: Factors,
         on_iteration: IterationCallback | None,
         poses: np.ndarray,
         inliers: np.ndarray,
@@ -227,16 +229,21 @@ class _Rounds:
         self.graph, self.robust, self.factors, self.linear_solver = graph, robust, factors, linear_solver
         self.solver_options, self.gnc_options, self.on_iteration = solver_options, gnc_options, on_iteration
         d = graph.tangent_dim
+        self.dims = factor_dims(graph, factors)
         self.readmit_at = readmit_quantile(gnc_options, robust)
         self.strict = replace(gnc_options, outlier_quantile=self.readmit_at)
-        self.ever_readmitted = np.zeros(graph.num_edges, dtype=bool)
+        self.ever_readmitted = np.zeros(len(robust), dtype=bool)
         # The rounds' problem (module docstring, "One analysis"): on a large system, the accepted
         # edges and every rejected loop that re-admission could take back at these poses.
         self.shared = d * graph.num_poses >= SHARED_ANALYSIS_MIN_UNKNOWNS
         self.members = inliers.copy()
         if self.shared:
             outside = np.flatnonzero(robust & ~inliers)
-            self.members[outside] = statistic_floor(factors.subset(outside), poses) <= chi2_quantile(self.readmit_at, d)
+            if isinstance(factors, FactorSet):  # a rejected prior stays in the problem (weight 0)
+                self.members[outside[outside >= factors.num_edges]] = True
+                outside = outside[outside < factors.num_edges]
+            loops = edge_factors(factors).subset(outside)
+            self.members[outside] = statistic_floor(loops, poses) <= chi2_quantile(self.readmit_at, d)
         self.system: RoundProblem | None = None
         self.loose = replace(solver_options, rel_cost_tol=max(solver_options.rel_cost_tol, ROUND_TOLERANCE))
 
@@ -271,7 +278,7 @@ class _Rounds:
     def classified(self, r: np.ndarray, back: np.ndarray, inliers: np.ndarray) -> np.ndarray:
         """The next round's accepted edges after the round of `inliers` `(E,)`: the outlier test at
         residuals `r` `(E,)`, and `back`."""
-        robust, d = self.robust, self.graph.tangent_dim
+        robust, d = self.robust, self.dims
         decided = classify_inliers(r, robust, d, self.gnc_options)
         if not self.gnc_options.readmit:
             return decided
@@ -287,13 +294,26 @@ class _Rounds:
         problem = round_system.problem
         refined = round_system.solve(poses, inliers, self.loose, self.on_iteration)
         r = self.residuals(refined.poses)
-        back = np.zeros(self.graph.num_edges, dtype=bool)
+        back = np.zeros(len(inliers), dtype=bool)
         if self.gnc_options.readmit:
             information = round_information(problem, refined)
             weights = round_system.weights(inliers)
             estimate = round_system.reach_estimate
-            back = readmitted(
-                problem, refined.poses, self.factors, ~inliers, r, self.readmit_at, information, weights, estimate
+            factors = self.factors
+            rejected, r_edges = ~inliers, r
+            if isinstance(factors, FactorSet):
+                rejected, r_edges = factors.edges_of(rejected), factors.edges_of(r)
+                back[factors.num_edges :] = readmitted_priors(factors, ~inliers, r, self.readmit_at)
+            back[: len(rejected)] = readmitted(
+                problem,
+                refined.poses,
+                edge_factors(factors),
+                rejected,
+                r_edges,
+                self.readmit_at,
+                information,
+                weights,
+                estimate,
             )
             problem.step_solver.discard_factorization()  # not held while a new round problem is built
             self.ever_readmitted |= back
@@ -312,7 +332,7 @@ def decide_outliers(
     solver_options: SolverOptions,
     gnc_options: GncOptions,
     linear_solver: str,
-    factors: BetweenFactors,
+    factors: Factors,
     on_stage: StageCallback | None = None,
     on_iteration: IterationCallback | None = None,
     inliers: np.ndarray | None = None,
@@ -323,7 +343,8 @@ def decide_outliers(
     Args:
         graph: the pose graph.
         poses: `(N, n, n)` starting poses (the last GNC stage's solution).
-        robust: `(E,)` bool, the loop closures that may be rejected.
+        robust: `(F,)` bool, the factors that may be rejected (loop closures; priors too where
+            `factors` is a `FactorSet`, `egnc.robust.factor_set`).
         solver_options: options of each least-squares refinement.
         gnc_options: `outlier_quantile` and `readmit`.
         linear_solver: resolved backend name.
@@ -336,7 +357,7 @@ def decide_outliers(
         The `Decision`. No round runs when the accepted edges would split the graph into more
         pieces than all edges do.
     """
-    d, q = graph.tangent_dim, gnc_options.outlier_quantile
+    d, q = factor_dims(graph, factors), gnc_options.outlier_quantile
     r = factors.whitened_norms(factors.residuals(poses))
     if inliers is None:
         inliers = classify_inliers(r, robust, d, gnc_options)
@@ -347,7 +368,7 @@ def decide_outliers(
     solved: dict[bytes, int] = {}  # classification -> its round in `history`
     history: list[tuple[np.ndarray, SolverResult, float]] = []  # inliers, solve, truncated cost
     for _ in range(MAX_ROUNDS):
-        if connected_components(graph.num_poses, graph.edges[inliers])[0] != components:
+        if connected_components(graph.num_poses, graph.edges[inliers[: graph.num_edges]])[0] != components:
             break
         started = time.perf_counter()
         refined, r, decided = rounds.run(poses, inliers)

@@ -82,8 +82,9 @@ class Schedule(Protocol):
         ...
 
 
-def exceeds(r: np.ndarray, quantile: float, d: int, convention: ThresholdConvention) -> np.ndarray:
-    """`(E,)` bool: residual norms above the chi-square `quantile` for dimension `d`.
+def exceeds(r: np.ndarray, quantile: float, d: int | np.ndarray, convention: ThresholdConvention) -> np.ndarray:
+    """`(E,)` bool: residual norms above the chi-square `quantile` for dimension `d` (an int, or
+    `(E,)` per factor, `egnc.robust.factor_set`).
 
     `"squared"` tests `r^2 > chi2.ppf(quantile, d)`; `"distance"` tests `r > chi2.ppf(quantile, d)`.
     """
@@ -96,7 +97,7 @@ class EgncSchedule:
     """Per-factor `mu` from the convexity boundary, with a chi-square rule for strong outliers."""
 
     robust: np.ndarray
-    d: int
+    d: int | np.ndarray
     c: float = 3.0
     strong_quantile: float = 0.9
     threshold: ThresholdConvention = "squared"
@@ -171,10 +172,16 @@ class RisamSchedule:
 
 @dataclass(eq=False)
 class YangGncSchedule:
-    """GNC-GM or GNC-TLS with GTSAM's defaults; weights fixed within a stage."""
+    """GNC-GM or GNC-TLS with GTSAM's defaults; weights fixed within a stage.
+
+    With factors of mixed dimension (`d` an `(F,)` array, `egnc.robust.factor_set`), each
+    factor's threshold is `0.5 chi2.ppf(0.99, d_k)`: the weights and the starting `mu` depend on
+    `f / barc2` only, so each `r` is scaled by `sqrt(barc2 / barc2_k)` against the largest
+    dimension's `barc2` before they are taken.
+    """
 
     robust: np.ndarray
-    d: int
+    d: int | np.ndarray
     kind: Literal["gm", "tls"]
     mu_step: float = 1.4
     rel_cost_tol: float = 1e-5
@@ -187,7 +194,7 @@ class YangGncSchedule:
 
     def first_stage(self, r: np.ndarray) -> Stage:
         """Stage 0: plain least squares (all weights 1), whose errors set the initial `mu`."""
-        self._barc2 = gnc_barc2(self.d)
+        self._barc2 = gnc_barc2(int(np.max(self.d)))
         self._kernel = make_kernel(f"gnc-{self.kind}", barc2=self._barc2)
         self._mu = None
         self._weights = np.ones(len(r))
@@ -197,8 +204,13 @@ class YangGncSchedule:
     def next_stage(self, r: np.ndarray, converged: bool) -> Stage | None:
         """Update `mu` and the fixed weights; None on GTSAM's stopping rules (cost, `mu`, binary weights)."""
         f = 0.5 * r * r
+        if np.ndim(self.d):  # mixed dimensions: each factor against its own threshold (class docstring)
+            r = r * np.sqrt(self._barc2 / (0.5 * chi2_quantile(0.99, self.d)))
+            f_scaled = 0.5 * r * r
+        else:
+            f_scaled = f
         if self._mu is None:
-            self._mu = self._initial_mu(f[self.robust])
+            self._mu = self._initial_mu(f_scaled[self.robust])
             if self._mu is None:  # every robust factor is already an inlier
                 return None
         else:
@@ -254,7 +266,7 @@ class SingleStage:
 def make_schedule(
     method: str,
     robust: np.ndarray,
-    d: int,
+    d: int | np.ndarray,
     *,
     c: float = 3.0,
     threshold: ThresholdConvention = "squared",
@@ -264,7 +276,7 @@ def make_schedule(
     Args:
         method: one of `METHODS`.
         robust: `(E,)` bool, the edges a kernel applies to (not known inliers).
-        d: residual dimension (3 in 2D, 6 in 3D).
+        d: residual dimension (3 in 2D, 6 in 3D), or `(E,)` per factor (`egnc.robust.factor_set`).
         c: shape of the SIG kernel (egnc, risam) and of Geman-McClure (gm).
         threshold: egnc's strong-outlier test convention, `"squared"` or `"distance"`.
     """

@@ -70,6 +70,7 @@ import numpy as np
 from egnc.nonlinear.factors import to_matrices
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, Problem, SolverResult, solve_least_squares
 from egnc.robust.decision import Decision, StartContext, truncated_cost
+from egnc.robust.factor_set import edge_factors
 from egnc.robust.gnc import GncOutcome, StageReport, StageStart, announce_stage, classify_inliers
 
 PROBE_ITERATIONS = 2
@@ -143,7 +144,7 @@ def _probe(context: StartContext, inliers: np.ndarray, poses: np.ndarray) -> Sol
     Its problem (pattern and factorization: 200 MiB on a 100 000-pose grid) is freed on return,
     before the decision rounds build their own.
     """
-    graph, factors = context.graph, context.factors
+    graph, factors = context.graph, edge_factors(context.factors)  # a start of loop closures alone
     problem = Problem.from_graph(graph.subgraph_edges(inliers), context.linear_solver, factors.subset(inliers))
     probe_options = replace(context.solver_options, max_iterations=PROBE_ITERATIONS)
     return solve_least_squares(problem, poses, None, probe_options, context.on_iteration)
