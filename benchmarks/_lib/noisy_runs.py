@@ -86,14 +86,27 @@ def batch_run(noisy, method: str) -> dict:
 
 
 def online_run(noisy, method: str) -> dict:
-    """One pose-by-pose replay (`egnc.online.replay`, default options) of a dataset, scored."""
-    from egnc.online.replay import replay
+    """One pose-by-pose replay (`egnc.online.replay`, default options) of a dataset, scored.
 
-    outcome = replay(noisy.graph, method, known_inliers=noisy.graph.is_odometry)
+    Besides the final decision (`result()`: a batch decision from the online estimate), the
+    running one (`OnlineSolver.inliers`: the chi-square test at the robust estimate, which the
+    schedule alone shapes): `P_now`, `R_now`, `missed_now` (outliers it keeps).
+    """
+    from egnc.metrics import precision_recall
+    from egnc.online.replay import replay, replay_steps
+
+    graph = noisy.graph
+    outcome = replay(graph, method, known_inliers=graph.is_odometry)
+    rejected_now = np.zeros(graph.num_edges, dtype=bool)
+    rejected_now[np.concatenate(replay_steps(graph, graph.is_odometry))] = ~outcome.solver.inliers
+    precision_now, recall_now = precision_recall(rejected_now, noisy.is_outlier)
     extra = {
         "iterations": int(outcome.update_iterations.sum()),
         "time_s": float(outcome.total_s),
         "start": outcome.result.start,
+        "P_now": precision_now,
+        "R_now": recall_now,
+        "missed_now": np.flatnonzero(noisy.is_outlier & ~rejected_now).tolist(),
     }
     return {**score(noisy, ~outcome.result.inliers, outcome.result.graph.poses), **extra}
 
