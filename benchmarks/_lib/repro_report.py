@@ -185,15 +185,22 @@ def figure_table2(rows: list[dict], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     counts: dict[tuple, int] = defaultdict(int)
+    totals: dict[tuple, int] = defaultdict(int)
     for row in rows:
         counts[(row["regime"], row["mode"], row["method"])] += int(row["ok"])
+        totals[(row["regime"], row["mode"], row["method"])] += 1
     groups = [(regime, mode) for regime in REGIMES for mode in ("online", "batch")]
     groups = [g for g in groups if any(key[:2] == g for key in counts)]
     figure, axes = plt.subplots(figsize=(7.5, 3.2))
     x = np.arange(len(groups) + 1)
     for k, method in enumerate(("egnc", "risam", "gnc-tls")):
         values = [counts.get((*g, method), 0) for g in groups] + [PAPER_TABLE2.get(method, 0)]
-        axes.bar(x + (k - 1) * 0.27, values, 0.27, label=method)
+        runs = [totals.get((*g, method), 0) for g in groups] + [50 if method in PAPER_TABLE2 else 0]
+        bars = axes.bar(x + (k - 1) * 0.27, values, 0.27, label=method)
+        for bar, value, n in zip(bars, values, runs, strict=True):
+            if n:  # successes out of the datasets run: the online rows may be partial
+                axes.annotate(f"{value}/{n}", (bar.get_x() + bar.get_width() / 2, value), ha="center",
+                              va="bottom", fontsize=6)  # fmt: skip
     labels = [f"{REGIMES[r].split(',')[0]}\n{m}" for r, m in groups] + ["paper\nonline"]
     axes.set_xticks(x, labels, fontsize=8)
     axes.set_ylabel("successes (P = R = 1)")
