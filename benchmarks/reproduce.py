@@ -1,33 +1,36 @@
 """Regenerate every table of REPRODUCTION.md: `python benchmarks/reproduce.py SECTION... [options]`.
 
-Sections (each writes `results.csv`, `results.md` and plots into `OUT/<section>[/<part>]/`):
+Sections (each writes its runs as JSON lines, `runs.jsonl`, and its table as markdown into
+`OUT/<section>/`; a section run again skips the runs already in its `runs.jsonl`):
 
-- `table1`: false loop closures (paper's Table 1): CSAIL, Intel, Manhattan3500 at 10/30/50 % and
-  Sphere2500 at 10 % with seeds 1-3, methods egnc, egnc[threshold=distance], risam, l2 (about 12
-  minutes on 2 cores); Sphere2500 at 30/50 % with seed 1, egnc and risam only, 900 s per run
-  (runs of 150 to 900 s: about half an hour).
-- `gtsam`: egnc and the riSAM schedule next to GTSAM's GNC-GM and GNC-TLS on CSAIL, Intel and
-  Manhattan3500 at 10/30 %, seed 1.
-- `table2`: noisy Manhattan (paper's Table 2): `--count` datasets made by
-  `egnc.datasets.make_noisy_manhattan` (seeds 1..count, default parameters) from
-  manhattanOlson3500 with its least-squares optimum as ground truth; success = precision = recall
-  = 1. The only section that is not an `egnc-bench` command, since `egnc-bench` corrupts with
-  false loops; it uses the same library calls (`egnc.bench.run_case`: every run in a child
-  process killed at the time limit, scored by egnc's chi-square rule), with the outlier-free
-  optimum as the ATE reference. `--write-datasets` also writes each dataset as an IRL file.
-- `manhattan-noisy`: the shipped `manhattan_noisy.irl` case (paper: EGNC P = R = 1, ATE 1.45 m,
-  RPE 3.2 %; riSAM ATE 23.6 m), then egnc's and riSAM's trajectories against the case's grid
-  ground truth (`ground_truth.md`), the paper's yardstick.
+- `table1`: false loop closures (the paper's Table 1) in the paper's setting, online: the cases of
+  `benchmarks/online.py replay` (CSAIL, Intel, manhattanOlson3500, sphere2500 at 10/30/50 %,
+  riSAM's generator rule, seed 0) replayed pose by pose with egnc's and riSAM's schedules
+  (precision, recall, iterations, time), and the same corrupted graphs solved in batch by egnc and
+  by GTSAM's GNC-TLS (`_lib/table1_runs.py`).
+- `table2`: noisy Manhattan (the paper's Table 2): `--count` datasets per outlier regime made by
+  `egnc.datasets.make_noisy_manhattan` (seeds 1..count) from manhattanOlson3500 with its
+  least-squares optimum as ground truth, replayed online (egnc, risam) and solved in batch
+  (egnc, risam, gnc-tls); every failure with the outliers it kept and their errors
+  (`_lib/noisy_runs.py`).
+- `table3`: the paper's case, `manhattan_noisy.irl`, and the gross-regime datasets where risam
+  failed in `table2`, both schedules, online and in batch, with ATE and RPE against the
+  outlier-free optimum and the ground truth (the irl's: its odometry rounded to the grid).
+- `manhattan-noisy`: the shipped `manhattan_noisy.irl` case through `egnc-bench`, then egnc's and
+  riSAM's trajectories against the case's grid ground truth (`ground_truth.md`).
+- `figures`: `table1.png` (egnc's online time and iterations over riSAM's per log) and
+  `table2.png` (successes per regime, mode and method, the paper's beside).
 
-The `egnc-bench` sections print their exact command before running it; `--dry-run` prints the
-commands only. Datasets are read from `--data-dir` (default `../shared/datasets` beside the
-checkout), never copied.
+`--dry-run` prints the `egnc-bench` commands only. Datasets are read from `--data-dir` (default
+`../shared/datasets` beside the checkout), never copied.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import itertools
+import json
 import os
 import platform
 import shlex
@@ -39,21 +42,12 @@ from pathlib import Path
 import numpy
 import numpy as np
 import scipy
+from _lib import noisy_runs, repro_report, table1_runs
 
 from egnc import solve
-from egnc.bench import (
-    BenchCase,
-    describe_run,
-    format_markdown,
-    parse_methods,
-    run_case,
-    summarize,
-    write_outputs,
-)
-from egnc.datasets import make_noisy_manhattan
-from egnc.datasets.noisy_manhattan import DEFAULT_ODOMETRY_SIGMA, DEFAULT_OUTLIER_SIGMA
+from egnc.datasets.noisy_manhattan import NoisyGraph
 from egnc.graph import PoseGraph
-from egnc.io import read_g2o, read_irl, write_irl
+from egnc.io import read_irl
 from egnc.metrics import ate, rpe
 from egnc.nonlinear.initialize import initialize_poses
 
@@ -61,40 +55,17 @@ REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA_DIR = REPO.parent / "shared" / "datasets"
 
 BENCH_SECTIONS = {
-    "table1": {
-        "table1/main": [
-            "--datasets", "csail,intel,manhattanOlson3500", "--percent", "10,30,50", "--seeds", "1,2,3",
-            "--methods", "egnc,egnc[threshold=distance],risam,l2", "--time-limit", "300",
-        ],
-        "table1/sphere10": [
-            "--datasets", "sphere2500", "--percent", "10", "--seeds", "1,2,3",
-            "--methods", "egnc,egnc[threshold=distance],risam,l2", "--time-limit", "300",
-        ],
-        # Runs of 150 to 900 s each: one seed, two methods.
-        "table1/sphere30-50": [
-            "--datasets", "sphere2500", "--percent", "30,50", "--seeds", "1",
-            "--methods", "egnc,risam", "--time-limit", "900",
-        ],
-    },
-    "gtsam": {
-        "gtsam": [
-            "--datasets", "csail,intel,manhattanOlson3500", "--percent", "10,30", "--seeds", "1",
-            "--methods", "egnc,risam,gtsam-gnc-gm,gtsam-gnc-tls", "--time-limit", "300",
-        ],
-    },
     "manhattan-noisy": {
         "manhattan-noisy": [
             "--irl", "{data_dir}/manhattan_noisy.irl",
-            "--methods", "egnc,egnc[threshold=distance],risam,gnc-tls,gtsam-gnc-tls", "--time-limit", "300",
+            "--methods", "egnc,risam,gnc-tls,gtsam-gnc-tls", "--time-limit", "300",
         ],
     },
 }  # fmt: skip
 """`egnc-bench` runs of each section: output subfolder -> arguments (`--data-dir` and `--out` are added)."""
 
-SECTIONS = ("table1", "gtsam", "table2", "manhattan-noisy")
-
-TABLE2_METHODS = "egnc,egnc[warm_start=true],risam,gnc-tls"
-"""table2's methods: the default batch protocol (stages restart from the initial guess) and warm starts."""
+SECTIONS = ("table1", "table2", "table3", "manhattan-noisy", "figures")
+TABLE1_DATASETS = "csail,intel,manhattanOlson3500,sphere2500"
 
 
 def bench_commands(section: str, data_dir: Path, out: Path) -> list[list[str]]:
@@ -108,60 +79,75 @@ def bench_commands(section: str, data_dir: Path, out: Path) -> list[list[str]]:
     return commands
 
 
-def run_table2(
-    data_dir: Path,
-    out: Path,
-    *,
-    count: int,
-    methods: str,
-    min_r2: list[float | None],
-    time_limit_s: float,
-    write_datasets: bool,
-) -> Path:
-    """Noisy-Manhattan success counts over `count` datasets per outlier regime; returns the results folder.
-
-    A regime is an `outlier_min_r2` of `make_noisy_manhattan` (None: the chi-square threshold);
-    the dataset column names it, e.g. `noisy_manhattan[r2>90]`.
-    """
-    folder = out / "table2"
-    specs = parse_methods(methods)
-    source = read_g2o(data_dir / "manhattanOlson3500.g2o")
-    truth = solve(source, "l2", linear_solver="scipy").graph.poses
-    records = []
-    total = len(min_r2) * count * len(specs)
-    for bound in min_r2:
-        name = "noisy_manhattan" if bound is None else f"noisy_manhattan[r2>{bound:g}]"
-        for seed in range(1, count + 1):
-            noisy = make_noisy_manhattan(source, truth, seed=seed, outlier_min_r2=bound)
-            if write_datasets:
-                (folder / "datasets").mkdir(parents=True, exist_ok=True)
-                notes = f"make_noisy_manhattan(manhattanOlson3500, seed={seed}, outlier_min_r2={bound})"
-                log = noisy.to_irl(f"{name}_{seed}", date="2000-01-01", notes=notes)
-                write_irl(log, folder / "datasets" / f"{name}_{seed}.irl")
-            case = BenchCase(
-                dataset=name,
-                percent=30.0,
-                seed=seed,
-                graph=noisy.graph,
-                is_outlier=noisy.is_outlier,
-                known_inliers=noisy.graph.is_odometry,
-                reference=noisy.reference,
-            )
-            for spec in specs:
-                record = run_case(case, spec, time_limit_s=time_limit_s)
-                records.append(record)
-                print(f"[{len(records)}/{total}] {describe_run(record)}", file=sys.stderr, flush=True)
-    header = (
-        f"`python benchmarks/reproduce.py table2 {table2_options(count, methods, min_r2, time_limit_s)}`\n\n"
-        f"{_machine()}. Datasets: `make_noisy_manhattan(manhattanOlson3500, its l2 optimum, seed=1..{count})`, "
-        f"odometry sigma {DEFAULT_ODOMETRY_SIGMA}, outlier sigma {DEFAULT_OUTLIER_SIGMA}, 30 % of the "
-        "2099 loop closures perturbed; `noisy_manhattan` keeps outliers above the chi-square threshold, "
-        "`noisy_manhattan[r2>X]` only those whose squared whitened error exceeds X. ATE/RPE against each "
-        "dataset's outlier-free optimum; success = precision = recall = 1."
+def run_table1(out: Path, *, datasets: str, percents: str, modes: tuple[str, ...], time_limit_s: float) -> Path:
+    """Table 1: `online.py replay`'s cases online (egnc, risam) and in batch (egnc, GTSAM's GNC-TLS)."""
+    folder = out / "table1"
+    runs = table1_runs.run_all(
+        folder / "runs.jsonl", datasets=datasets, percents=percents, modes=modes, time_limit_s=time_limit_s
     )
-    write_outputs(records, folder, baseline_method="risam", header=header)
-    print(format_markdown(summarize(records, "risam"), "risam"))
+    text = repro_report.table1_markdown(_rows(runs))
+    _write(folder / "table1.md", f"{_machine()}\n\n{text}")
     return folder
+
+
+def run_table2(
+    data_dir: Path, out: Path, *, count: int, methods: str, min_r2: list[float | None], modes: tuple[str, ...]
+) -> Path:
+    """Table 2: `count` noisy-Manhattan datasets per regime, online and in batch, with every failure's edges."""
+    folder = out / "table2"
+    batch_methods = tuple(filter(None, methods.split(",")))
+    runs = noisy_runs.run_all(
+        data_dir, folder / "runs.jsonl", count=count, bounds=min_r2, modes=modes, batch_methods=batch_methods
+    )
+    rows = _rows(runs)
+    parts = [_machine(), repro_report.table2_markdown(rows)]
+    for regime in dict.fromkeys(row["regime"] for row in rows):
+        parts += [f"Failures, {regime}:", repro_report.failures_markdown(rows, regime)]
+        parts.append(f"Truncated costs, batch, {regime}: {repro_report.criterion_summary(rows, regime)}")
+    _write(folder / "table2.md", "\n\n".join(parts) + "\n")
+    return folder
+
+
+def run_table3(data_dir: Path, out: Path) -> Path:
+    """Table 3: the paper's case (`manhattan_noisy.irl`) and the gross-regime datasets where risam failed
+    in Table 2, both schedules, online and in batch, with ATE and RPE."""
+    folder = out / "table3"
+    table2 = out / "table2" / "runs.jsonl"
+    wanted = noisy_runs.risam_failures(_rows(table2)) if table2.exists() else []
+    shipped = [("irl", 0, shipped_case(data_dir))] if (data_dir / "manhattan_noisy.irl").exists() else []
+    cases = itertools.chain(shipped, noisy_runs.selected(data_dir, wanted))
+    runs = noisy_runs.run_cases(folder / "runs.jsonl", cases, ("online", "batch"), ("egnc", "risam"))
+    rows = _rows(runs) if runs.exists() else []
+    text = repro_report.table3_markdown(rows) if rows else "No shipped case; risam failed on no dataset of Table 2.\n"
+    _write(folder / "table3.md", f"{_machine()}\n\n{text}")
+    return folder
+
+
+def shipped_case(data_dir: Path) -> NoisyGraph:
+    """`manhattan_noisy.irl` as a noisy-Manhattan dataset: labels, grid ground truth, outlier-free optimum."""
+    log = read_irl(data_dir / "manhattan_noisy.irl")
+    reference = solve(log.graph.subgraph_edges(~log.is_outlier), "l2").graph.poses
+    return NoisyGraph(log.graph, log.is_outlier, grid_ground_truth(log.graph), reference)
+
+
+def run_figures(out: Path) -> list[Path]:
+    """The figures of Tables 1 and 2 from their runs, beside their tables."""
+    made = []
+    for name, draw in (("table1", repro_report.figure_table1), ("table2", repro_report.figure_table2)):
+        runs = out / name / "runs.jsonl"
+        if runs.exists():
+            made.append(draw(_rows(runs), out / name / f"{name}.png"))
+    return made
+
+
+def _rows(path: Path) -> list[dict]:
+    return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
+
+
+def _write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    print(text)
 
 
 def grid_ground_truth(graph: PoseGraph) -> np.ndarray:
@@ -215,12 +201,6 @@ def run_ground_truth_errors(data_dir: Path, out: Path, methods: tuple[str, ...] 
     return folder
 
 
-def table2_options(count: int, methods: str, min_r2: list[float | None], time_limit_s: float) -> str:
-    """The command-line options that reproduce a table2 run."""
-    bounds = ",".join("none" if bound is None else f"{bound:g}" for bound in min_r2)
-    return f"--count {count} --methods {shlex.quote(methods)} --outlier-min-r2 {bounds} --time-limit {time_limit_s:g}"
-
-
 def _min_r2(text: str) -> list[float | None]:
     """`none,90` -> `[None, 90.0]`."""
     try:
@@ -255,34 +235,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data-dir", type=Path, default=DEFAULT_DATA_DIR, help="benchmark datasets folder")
     parser.add_argument("--out", type=Path, default=Path("reproduction"), help="output folder (default reproduction)")
     parser.add_argument("--count", type=int, default=50, help="table2: noisy datasets per regime (default 50)")
-    parser.add_argument("--methods", default=TABLE2_METHODS, help=f"table2: methods (default {TABLE2_METHODS})")
+    parser.add_argument(
+        "--methods", default="egnc,risam,gnc-tls", help="table2: batch methods (default egnc,risam,gnc-tls)"
+    )
     parser.add_argument(
         "--outlier-min-r2",
         type=_min_r2,
-        default=[None, 90.0],
-        help="table2: outlier regimes, make_noisy_manhattan's outlier_min_r2 values, none = chi2 (default none,90)",
+        default=[90.0, None],
+        help="table2: outlier regimes, make_noisy_manhattan's outlier_min_r2 values, none = chi2 (default 90,none)",
     )
-    parser.add_argument("--time-limit", type=float, default=120.0, help="table2: seconds per run (default 120)")
-    parser.add_argument("--write-datasets", action="store_true", help="table2: also write the datasets as IRL")
-    parser.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    parser.add_argument("--modes", default="online,batch", help="table1, table2: online, batch or both (default)")
+    parser.add_argument("--datasets", default=TABLE1_DATASETS, help=f"table1: logs (default {TABLE1_DATASETS})")
+    parser.add_argument("--percents", default="10,30,50", help="table1: false-loop percentages (default 10,30,50)")
+    parser.add_argument("--time-limit", type=float, default=300.0, help="table1: seconds per batch run (default 300)")
+    parser.add_argument("--dry-run", action="store_true", help="print the egnc-bench commands, run nothing")
     args = parser.parse_args(argv)
     sections = SECTIONS if "all" in args.sections else tuple(dict.fromkeys(args.sections))
+    modes = tuple(mode for mode in ("online", "batch") if mode in args.modes.split(","))
+    started_all = time.perf_counter()
     for section in sections:
         started = time.perf_counter()
-        if section == "table2":
-            options = table2_options(args.count, args.methods, args.outlier_min_r2, args.time_limit)
-            print(f"# table2: python benchmarks/reproduce.py table2 {options}", flush=True)
-            if not args.dry_run:
-                run_table2(
-                    args.data_dir,
-                    args.out,
-                    count=args.count,
-                    methods=args.methods,
-                    min_r2=args.outlier_min_r2,
-                    time_limit_s=args.time_limit,
-                    write_datasets=args.write_datasets,
-                )
-        else:
+        print(f"# {section}", flush=True)
+        if section == "manhattan-noisy":
             for command in bench_commands(section, args.data_dir, args.out):
                 print(f"# {section}: {shlex.join(command)}", flush=True)
                 if args.dry_run:
@@ -291,10 +265,25 @@ def main(argv: list[str] | None = None) -> int:
                 if status != 0:
                     print(f"reproduce: {section} failed with exit code {status}", file=sys.stderr)
                     return status
-            if section == "manhattan-noisy" and not args.dry_run:
+            if not args.dry_run:
                 run_ground_truth_errors(args.data_dir, args.out)
+        elif args.dry_run:
+            continue
+        elif section == "table1":
+            run_table1(args.out, datasets=args.datasets, percents=args.percents, modes=modes,
+                       time_limit_s=args.time_limit)  # fmt: skip
+        elif section == "table2":
+            run_table2(args.data_dir, args.out, count=args.count, methods=args.methods, min_r2=args.outlier_min_r2,
+                       modes=modes)  # fmt: skip
+        elif section == "table3":
+            run_table3(args.data_dir, args.out)
+        else:
+            for path in run_figures(args.out):
+                print(f"# figure: {path}")
         if not args.dry_run:
             print(f"# {section}: {time.perf_counter() - started:.0f} s of wall time", flush=True)
+    if not args.dry_run:
+        print(f"# all sections: {time.perf_counter() - started_all:.0f} s of wall time", flush=True)
     return 0
 
 

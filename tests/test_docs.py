@@ -10,9 +10,12 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).parents[1]
-PAGES = [REPO / "README.md", REPO / "BENCHMARKS.md", REPO / "RELIABILITY.md", *sorted((REPO / "docs").glob("*.md"))]
+PAGES = [
+    *(REPO / name for name in ("README.md", "BENCHMARKS.md", "RELIABILITY.md", "REPRODUCTION.md")),
+    *sorted((REPO / "docs").glob("*.md")),
+]
 # Pages for users that say what holds today: no issue or session numbers (the history keeps those).
-USER_PAGES = ["BENCHMARKS.md", "RELIABILITY.md"] + [
+USER_PAGES = ["BENCHMARKS.md", "RELIABILITY.md", "REPRODUCTION.md"] + [
     f"docs/{name}.md" for name in ("comparison", "conventions", "decisions", "evaluation", "g2o", "install", "overview")
 ]
 LINK = re.compile(r"\]\(([^)\s]+)\)")
