@@ -11,20 +11,16 @@ ignored; numbers follow the grammar of `egnc.io.numbers`:
 - priors: `EDGE_SE2_PRIOR`, `EDGE_SE2_XYPRIOR`, `EDGE_SE3_PRIOR`, `EDGE_SE3_XYZPRIOR` and the
   `PARAMS_SE3OFFSET` they name (`egnc.io.g2o_priors`); edges and priors are the graph's factors,
   numbered in file order (`PoseGraph.edge_factor_index`, `prior_factor_index`).
-- TORO's 2D records, as GTSAM's `load2D` reads them: `VERTEX2 id x y theta`, and
-  `EDGE2 i j dx dy dtheta I11 I12 I22 I33 I13 I23`: the information matrix in TORO's order
-  (`inf_ff inf_fs inf_ss inf_rr inf_fr inf_sr`; GTSAM's `NoiseFormatTORO`, checked against the
-  gtsam 4.3 wheel). GTSAM's default `NoiseFormatAUTO` instead guesses a covariance from some
-  zero patterns; egnc follows TORO's definition. `write_g2o` writes them as `VERTEX_SE2` and
-  `EDGE_SE2`.
+- TORO's 2D records as GTSAM's `load2D` reads them with `NoiseFormatTORO` (checked against the
+  gtsam 4.3 wheel): `VERTEX2 id x y theta`, `EDGE2 i j dx dy dtheta I11 I12 I22 I33 I13 I23`
+  (information in TORO's order); `write_g2o` writes them as `VERTEX_SE2` and `EDGE_SE2`.
 
 Information matrices are given as their upper triangle, row-major, ordered translation-then-rotation
 (`x y theta` in 2D, `x y z rx ry rz` in 3D). Values are stored exactly as read: angles are not
 wrapped and quaternions are not normalized (that happens when converting to matrices).
 
-Reading validates everything before building arrays, so a bad file gives a one-line
-`G2oFormatError` naming the file and 1-based line, never a NumPy traceback. Poses without a VERTEX
-line get their initial guess from `egnc.nonlinear.initialize`.
+Reading validates everything first: a bad file gives a one-line `G2oFormatError` naming the file
+and 1-based line. Poses without a VERTEX line are initialized by `egnc.nonlinear.initialize`.
 """
 
 from __future__ import annotations
