@@ -168,3 +168,51 @@ def test_online_replay_of_a_graph_with_priors_runs_on_its_edges():
     graph, _ = gnss_graph(2, 120)
     outcome = replay(graph)
     assert outcome.result.rejected_edges.shape == (0,)
+
+
+def heading_drifted(graph, sigma: float, seed: int):
+    """`graph` with its guess chained from odometry whose headings carry extra `N(0, sigma)` rad per step."""
+    from egnc.nonlinear.factors import from_matrices, to_matrices
+    from egnc.nonlinear.initialize import initialize_poses
+
+    Z = to_matrices(2, graph.measurements[graph.is_odometry])
+    angle = np.random.default_rng(seed).normal(0.0, sigma, size=len(Z))
+    c, s = np.cos(angle), np.sin(angle)
+    Z[:, :2, :2] = Z[:, :2, :2] @ np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    known = np.arange(graph.num_poses) == 0
+    odometry = graph.edges[graph.is_odometry]
+    return graph.with_poses(initialize_poses(2, odometry, from_matrices(2, Z), poses=graph.poses, known=known))
+
+
+def test_chordal_starts_in_the_fixes_frame_win_back_a_drifted_guess():
+    # Chained over 1000 poses with 0.5 rad of heading noise a step, the guess is far from every
+    # fix; the GNC stage from it (moved onto the fixes) rejects honest fixes. The chordal starts,
+    # moved onto the fixes too, do not read the guess and decide exactly.
+    world = grid_world(2, 1000, seed=2)
+    optimum = egnc.solve(world.graph, "l2").graph.poses
+    fixed = add_position_priors(world.graph, optimum, every=20, sigma=1.0, seed=2)
+    corrupted = add_multipath_outliers(fixed, 20, seed=5, bursts=True, burst_size=(3, 6))
+    drifted = heading_drifted(corrupted.graph, 0.5, seed=2)
+    result = egnc.solve(drifted)
+    expected = corrupted.graph.prior_factor_index[corrupted.is_outlier]
+    np.testing.assert_array_equal(np.sort(result.rejected_priors), np.sort(expected))
+    assert result.rejected_edges.shape == (0,)
+    assert result.start != "guess"
+    guess_only = egnc.solve(drifted, gnc_options=GncOptions(starts=()))
+    assert len(guess_only.rejected_priors) > len(expected)  # the guess alone does not get there
+
+
+def test_with_candidate_priors_the_loop_only_starts_do_not_run(monkeypatch):
+    from egnc.robust import pipeline
+
+    proposed: list[str] = []
+    for name in pipeline.LOOPS_ONLY:
+        monkeypatch.setattr(
+            pipeline.STARTS[name], "propose", lambda search, name=name: proposed.append(name) or (None, ())
+        )
+    graph, _ = gnss_graph(2, 120)
+    corrupted = add_multipath_outliers(graph, 20, seed=5).graph
+    egnc.solve(corrupted)
+    assert proposed == []
+    egnc.solve(corrupted, known_inliers="odometry,priors")  # priors held: every start runs
+    assert proposed == list(pipeline.LOOPS_ONLY)

@@ -27,7 +27,7 @@ truncated cost (`egnc.robust.costs`). This module holds what every start works o
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from egnc.graph import PoseGraph
 from egnc.nonlinear.chordal import chordal_initialization
 from egnc.nonlinear.factors import to_matrices
 from egnc.nonlinear.least_squares import IterationCallback, SolverOptions
+from egnc.nonlinear.prior_alignment import align_to_priors
 from egnc.robust.costs import lower_by_more_than_rounding, readmit_quantile, truncated_cost
 from egnc.robust.factor_set import Factors, FactorSet, factor_dims
 from egnc.robust.gnc import GncOptions, StageCallback, StageStart
@@ -108,13 +109,26 @@ class StartContext:
     on_iteration: IterationCallback | None = None
 
     def chordal_poses(self, keep: np.ndarray) -> np.ndarray | None:
-        """`(N, n, n)` chordal initialization over the edges `keep` `(E,)` bool, or None when the
-        backend cannot factorize its system."""
+        """`(N, n, n)` chordal initialization over the factors `keep`, or None when the backend
+        cannot factorize its system.
+
+        `keep`: `(E,)` bool over the edges, or `(F,)` over the factors (`robust`'s shape). The
+        relaxation is solved over the kept edges; where the graph has priors, the map is then
+        moved onto the kept priors (all of them for an `(E,)` mask) by the trimmed rigid fit of
+        `egnc.nonlinear.prior_alignment`, so that it starts in the fixes' frame as the guess does.
+        """
+        graph = self.graph
         try:
-            chordal = chordal_initialization(self.graph.subgraph_edges(keep), linear_solver=self.linear_solver)
+            chordal = chordal_initialization(
+                graph.subgraph_edges(keep[: graph.num_edges]), linear_solver=self.linear_solver
+            )
         except SolverError:
             return None
-        return to_matrices(self.graph.dim, chordal)
+        if graph.num_priors:
+            kept = keep[graph.num_edges :] if len(keep) > graph.num_edges else np.ones(graph.num_priors, dtype=bool)
+            if kept.any():
+                chordal = align_to_priors(replace(graph, priors=graph.priors.subset(kept)), chordal)
+        return to_matrices(graph.dim, chordal)
 
     def cost_at(self, poses: np.ndarray) -> float:
         """`truncated_cost` of the graph at `poses` `(N, n, n)`, at the outlier test's quantile."""

@@ -29,9 +29,12 @@ where it does not apply) and the reports of the solves it ran. `STARTS` holds th
 - `"parts"` (`egnc.robust.parts`): where the known inliers fall into parts (two robots), one
   decision per group of agreeing loops between them, that group alone accepted between the parts.
 
-Where priors are candidates (`egnc.robust.factor_set`) only the guess decides: the other starts
-rebuild maps from the loop closures alone (chordal maps, runs of loops, backward elimination
-over loops) and do not yet weigh priors.
+Where the graph has priors, every chordal map (the runs', chordal, chordal-all, regrouped) is
+moved onto the fixes by a trimmed rigid fit (`egnc.robust.decision.StartContext.chordal_poses`),
+so it starts in their frame as the guess does. Where priors are candidates
+(`egnc.robust.factor_set`) those starts classify every factor, priors included, each at its own
+dimension; `"elimination"` and `"parts"` do not run: they reason about loop closures alone
+(backward elimination over loops, groups of loops between parts) and do not weigh priors.
 
 Each start after the guess tries to beat the best decision so far (`Search.best`); a decision
 replaces the kept one only when lower by more than rounding
@@ -287,6 +290,9 @@ STARTS: dict[str, Start] = {
 """The starts `GncOptions.starts` chooses from, by name (`egnc.robust.gnc.START_NAMES`)."""
 assert tuple(STARTS) == START_NAMES
 
+LOOPS_ONLY = ("elimination", "parts")
+"""The starts that do not run where priors are candidates (module docstring)."""
+
 DESCRIPTIONS = {start.name: start.description for start in (GUESS, *STARTS.values())}
 """How a result's message names each start."""
 
@@ -304,8 +310,8 @@ def search_decisions(context: StartContext, initial: np.ndarray, graduate: Gradu
         names: the starts to run, `"runs"` first if given.
     """
     search = Search(context, initial, graduate)
-    if context.with_priors:  # the other starts decide on loop closures alone (module docstring)
-        names = ()
+    if context.with_priors:  # these starts reason about loop closures alone (module docstring)
+        names = tuple(name for name in names if name not in LOOPS_ONLY)
     pipeline = [STARTS[name] for name in names]
     if pipeline[:1] == [STARTS["runs"]]:
         pipeline.insert(1, GUESS)

@@ -123,6 +123,11 @@ def loop_runs(loops: BetweenFactors, poses: np.ndarray, threshold: float, window
     return connected_components(len(loops.edges), pairs)[1]
 
 
+def _loops(context: StartContext, chosen: np.ndarray) -> np.ndarray:
+    """The edge indices of the loop closures among the `chosen` `(F,)` factors (priors have no runs)."""
+    return np.flatnonzero(chosen[: context.graph.num_edges])
+
+
 def _runs_at(context: StartContext, loops: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`(labels, in_run)`, both `(K,)`, of the loop closures `loops` (edge indices) at `poses` `(N, n, n)`.
 
@@ -147,8 +152,8 @@ def regrouped_decision(context: StartContext, to_beat: Decision) -> tuple[Decisi
         `(decision, reports)`: the decision, or None where no run of `MIN_RUN` rejected loops
         exists or the chordal system cannot be factorized, and the reports of its rounds.
     """
-    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
-    rejected = np.flatnonzero(robust & ~to_beat.inliers)
+    robust, factors, gnc_options = context.robust, context.factors, context.gnc_options
+    rejected = _loops(context, robust & ~to_beat.inliers)
     in_run = _runs_at(context, rejected, to_beat.poses)[1]
     if not in_run.any():
         return None, ()
@@ -158,7 +163,7 @@ def regrouped_decision(context: StartContext, to_beat: Decision) -> tuple[Decisi
     if poses is None:  # a chordal system the backend cannot factorize: no regrouped start
         return None, ()
     r = factors.whitened_norms(factors.residuals(poses))
-    decision = context.decide(poses, classify_inliers(r, robust, graph.tangent_dim, gnc_options), "regrouped")
+    decision = context.decide(poses, classify_inliers(r, robust, context.dims, gnc_options), "regrouped")
     return decision, decision.reports
 
 
@@ -168,14 +173,14 @@ class RunsStart:
 
     Attributes:
         poses: `(N, n, n)` the chordal map of the known inliers and the loops in runs.
-        runs: `(E,)` int64 run label of each loop closure in the map, -1 for every other edge.
+        runs: `(F,)` int64 run label of each loop closure in the map, -1 for every other factor.
     """
 
     poses: np.ndarray
     runs: np.ndarray
 
     def contradicted(self, inliers: np.ndarray) -> bool:
-        """Whether the decision `inliers` `(E,)` bool rejects at least `MIN_RUN` loops of one run.
+        """Whether the decision `inliers` `(F,)` bool rejects at least `MIN_RUN` loops of one run.
 
         The map assumed every run true. A run rejected as a whole was not (a group of false loops
         that agree with each other, riSAM's "group" variant), and the map it bent may have led
@@ -195,21 +200,23 @@ def runs_start(context: StartContext, poses: np.ndarray) -> RunsStart | None:
 
     Returns:
         The chordal map of the edges that are not robust and the loop closures in runs of at least
-        `MIN_RUN` at `poses`, with the runs; None where no such run exists, the backend cannot
-        factorize its chordal system, or its truncated cost is not lower than that of `poses`.
+        `MIN_RUN` at `poses` (in the priors' frame where the graph has priors), with the runs;
+        None where no such run exists, the backend cannot factorize its chordal system, or its
+        truncated cost is not lower than that of `poses`.
     """
-    graph, robust = context.graph, context.robust
-    loops = np.flatnonzero(robust)
+    robust = context.robust
+    loops = _loops(context, robust)
     labels, in_run = _runs_at(context, loops, poses)
     if not in_run.any():
         return None
     keep = ~robust
     keep[loops[in_run]] = True
+    keep[context.graph.num_edges :] = True  # every prior frames the map: the trimmed fit passes over wrong ones
     start = context.chordal_poses(keep)
     if start is None:  # a chordal system the backend cannot factorize
         return None
     if context.cost_at(start) >= context.cost_at(poses):
         return None
-    runs = np.full(graph.num_edges, -1, dtype=np.int64)
+    runs = np.full(len(robust), -1, dtype=np.int64)
     runs[loops[in_run]] = labels[in_run]
     return RunsStart(start, runs)

@@ -68,9 +68,9 @@ from dataclasses import replace
 import numpy as np
 
 from egnc.nonlinear.factors import to_matrices
-from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, Problem, SolverResult, solve_least_squares
+from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverResult, solve_least_squares
 from egnc.robust.decision import Decision, StartContext, truncated_cost
-from egnc.robust.factor_set import edge_factors
+from egnc.robust.factor_set import factor_problem
 from egnc.robust.gnc import GncOutcome, StageReport, StageStart, announce_stage, classify_inliers
 
 PROBE_ITERATIONS = 2
@@ -95,8 +95,9 @@ def chordal_decision(
     Args:
         context: the graph, its factors, options and callbacks (the probe and each round are stages).
         to_beat: the decision started from the initial guess.
-        trusted: `(E,)` bool, the edges the chordal initialization uses: those the GNC stage
-            had not switched off (IRLS weight at least `SolverOptions.trust_weight`).
+        trusted: `(F,)` bool, the factors the chordal initialization uses: those the GNC stage
+            had not switched off (IRLS weight at least `SolverOptions.trust_weight`); its edges
+            give the relaxation, its priors the frame (`StartContext.chordal_poses`).
         chordal_map: `(N, n, n)` a chordal map already solved (the runs start's), used instead
             of solving one over `trusted`.
 
@@ -105,8 +106,8 @@ def chordal_decision(
         loop to win back, gate, probe), and the reports of every solve run here (the probe and
         the rounds).
     """
-    graph, robust, factors, gnc_options = context.graph, context.robust, context.factors, context.gnc_options
-    d, q = graph.tangent_dim, gnc_options.outlier_quantile
+    robust, factors, gnc_options = context.robust, context.factors, context.gnc_options
+    d, q = context.dims, gnc_options.outlier_quantile
     poses = context.chordal_poses(trusted) if chordal_map is None else chordal_map
     if poses is None:  # a chordal system the backend cannot factorize: no second start
         return None, ()
@@ -139,13 +140,12 @@ def chordal_decision(
 
 
 def _probe(context: StartContext, inliers: np.ndarray, poses: np.ndarray) -> SolverResult:
-    """At most `PROBE_ITERATIONS` least-squares steps on the `inliers` `(E,)` edges from `poses` `(N, n, n)`.
+    """At most `PROBE_ITERATIONS` least-squares steps on the `inliers` `(F,)` factors from `poses` `(N, n, n)`.
 
     Its problem (pattern and factorization: 200 MiB on a 100 000-pose grid) is freed on return,
     before the decision rounds build their own.
     """
-    graph, factors = context.graph, edge_factors(context.factors)  # a start of loop closures alone
-    problem = Problem.from_graph(graph.subgraph_edges(inliers), context.linear_solver, factors.subset(inliers))
+    problem = factor_problem(context.graph, context.factors, context.linear_solver, inliers)
     probe_options = replace(context.solver_options, max_iterations=PROBE_ITERATIONS)
     return solve_least_squares(problem, poses, None, probe_options, context.on_iteration)
 
@@ -194,6 +194,6 @@ def graduated_decision(
     if outcome.status == NUMERICAL_FAILURE:
         return None, outcome.stages
     r = context.factors.whitened_norms(context.factors.residuals(outcome.poses))
-    inliers = classify_inliers(r, context.robust, context.graph.tangent_dim, context.gnc_options)
+    inliers = classify_inliers(r, context.robust, context.dims, context.gnc_options)
     decision = context.decide(outcome.poses, inliers, start)
     return decision, (*outcome.stages, *decision.reports)
