@@ -7,7 +7,8 @@
     python benchmarks/robust.py gtsam-bridge [--data-dir DIR] [--files MIT,...] [--percent 0,30]
         [--no-files] [--no-robots]
     python benchmarks/robust.py gnss [--files manhattanOlson3500,...] [--loops 0,10,30] [--priors 0,10,20]
-        [--every 10] [--sigma 2] [--seed 1] [--guess file|heading:0.3|scaled:10] [--no-gtsam]
+        [--every 10] [--sigma 2] [--seed 1] [--guess file|heading:0.3|scaled:10]
+        [--gtsam-time-limit 900] [--no-gtsam]
 
 - `clean` (`_lib/robust_clean.py`): files without false loops, the default `egnc.solve` against
   `l2`: loops rejected, ATE to the `l2` optimum, both costs, warnings and times.
@@ -92,6 +93,7 @@ def parser() -> argparse.ArgumentParser:
     gnss.add_argument(
         "--guess", default="file", help="'file', or drifted KIND:LEVEL (heading:0.3 rad a step, scaled:10 sigmas)"
     )
+    gnss.add_argument("--gtsam-time-limit", type=float, default=900.0, help="seconds per GTSAM solve (a child)")
     gnss.add_argument("--no-gtsam", action="store_true")
     return top
 

@@ -28,7 +28,8 @@ def test_guess_is_the_files_own_or_drifted_and_seeded():
         guessed(graph, "sideways:1", 1)
 
 
-def test_gnss_command_takes_the_guess():
-    args = parser().parse_args(["gnss", "--guess", "heading:0.3", "--no-gtsam"])
-    assert args.guess == "heading:0.3"
-    assert parser().parse_args(["gnss"]).guess == "file"
+def test_gnss_command_takes_the_guess_and_gtsams_time_limit():
+    args = parser().parse_args(["gnss", "--guess", "heading:0.3", "--gtsam-time-limit", "60"])
+    assert (args.guess, args.gtsam_time_limit) == ("heading:0.3", 60.0)
+    default = parser().parse_args(["gnss"])
+    assert (default.guess, default.gtsam_time_limit) == ("file", 900.0)
