@@ -28,7 +28,7 @@ def test_guess_is_the_files_own_or_drifted_and_seeded():
         guessed(graph, "sideways:1", 1)
 
 
-def test_gnss_command_takes_the_guess_and_gtsams_time_limit():
+def test_gnss_command_takes_the_guess_and_the_reference_time_limit():
     args = parser().parse_args(["gnss", "--guess", "heading:0.3", "--gtsam-time-limit", "60"])
     assert (args.guess, args.gtsam_time_limit) == ("heading:0.3", 60.0)
     default = parser().parse_args(["gnss"])
