@@ -34,6 +34,7 @@ NAMES = (
     "04_false_loops.ipynb",
     "05_your_data.ipynb",
     "06_online.ipynb",
+    "07_gnss_priors.ipynb",
 )
 TIMEOUT_S = 120
 """Budget of one notebook, start to end (each is meant to take well under a minute)."""
@@ -169,6 +170,26 @@ def test_online_notebook_prints_its_answer(run_notebook):
     assert answer, text
     assert 0 < int(answer[1]) < int(answer[2])
     assert "egnc.online.replay makes the same updates and the same final decisions as the loop above" in text
+
+
+def test_gnss_notebook_rejects_the_multipath_burst_and_the_false_loops(run_notebook):
+    """07: trusting the fixes bends the map; as candidates, every moved fix and false loop is rejected, nothing else."""
+    notebook, _ = run_notebook("07_gnss_priors.ipynb")
+    text = code_text(notebook)
+    trusted = re.search(r"^fixes trusted +: ATE +([\d.]+) m; (\d+) loops and 0 fixes rejected", text, re.MULTILINE)
+    default = re.search(
+        r"^fixes as candidates \(default\): ATE +([\d.]+) m; (\d+) loops and (\d+) fixes rejected; "
+        r"loops P = 1.000, R = 1.000, priors P = 1.000, R = 1.000;",
+        text,
+        re.MULTILINE,
+    )
+    assert trusted and default, text
+    false_loops, moved = re.search(r"(\d+) of them false\), \d+ fixes of which (\d+) moved by multipath", text).groups()
+    assert (default[2], default[3]) == (false_loops, moved) and int(moved) > 0
+    assert float(default[1]) < 0.1 and float(trusted[1]) > 1.0  # ATE, metres
+    written = Path(re.search(r"^egnc-corrupt .* -o (\S+\.g2o)$", text, re.MULTILINE)[1])
+    assert written.is_file() and written.with_suffix(".labels.json").is_file()
+    shutil.rmtree(written.parent)  # the notebook's temporary folder
 
 
 def test_false_loops_notebook_records_its_solve_for_rerun(run_notebook):
