@@ -1,7 +1,7 @@
 """Two robots from one pose graph: a trajectory cut in two, joined only by inter-robot loops.
 
 The first `split` poses are robot `a`, the rest robot `b`; their vertex ids are GTSAM
-`Symbol('a', k)` and `Symbol('b', k)` keys as int64 (`egnc.interop.gtsam`), so each robot's
+`Symbol('a', k)` and `Symbol('b', k)` keys as int64 (`egnc.graph.symbols`), so each robot's
 odometry is still consecutive ids. The odometry edge across the cut is dropped; the loops within a
 robot stay; the loops across the cut are the true inter-robot loops (`true_loops` of them kept,
 drawn by the seed). Robot `b`'s guess is in its own frame: its first pose at the identity, as a
@@ -29,6 +29,7 @@ import numpy as np
 from egnc.datasets.false_loops import FALSE_LOOP_COVARIANCE, false_loop_count
 from egnc.errors import EgncError
 from egnc.graph import PoseGraph
+from egnc.graph.symbols import symbol_id
 from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
 
 __all__ = ["SYMBOL_A", "SYMBOL_B", "TwoRobots", "symbol_id", "two_robots"]
@@ -38,11 +39,6 @@ SYMBOL_A, SYMBOL_B = "a", "b"
 
 TRUE_LOOP, RANDOM_FALSE, GROUP_FALSE = 1, 2, 3
 """Codes of `TwoRobots.kinds` for inter-robot loops (0: an edge of one robot)."""
-
-
-def symbol_id(character: str, index: np.ndarray | int) -> np.ndarray:
-    """The int64 id of GTSAM's `Symbol(character, index)` key (character in the top 8 bits)."""
-    return (np.int64(ord(character)) << np.int64(56)) + np.asarray(index, dtype=np.int64)
 
 
 @dataclass(frozen=True, eq=False)
