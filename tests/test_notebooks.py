@@ -192,6 +192,16 @@ def test_gnss_notebook_rejects_the_multipath_burst_and_the_false_loops(run_noteb
     shutil.rmtree(written.parent)  # the notebook's temporary folder
 
 
+def test_false_loops_notebook_table_says_what_its_text_says(run_notebook):
+    """04: every graduated method rejects exactly the false loops; EGNC and riSAM take as many stages, GNC more."""
+    notebook, _ = run_notebook("04_false_loops.ipynb")
+    rows = re.findall(r"^([\w-]+) +[\d.]+ +(\d+) +\d+ +([\d.]+) +([\d.]+) ", code_text(notebook), re.MULTILINE)
+    table = {method: (int(stages), float(p), float(r)) for method, stages, p, r in rows}
+    assert set(table) == {"l2", "egnc", "risam", "gnc-tls", "gnc-gm"}
+    assert all(table[method][1:] == (1.0, 1.0) for method in ("egnc", "risam", "gnc-tls", "gnc-gm"))
+    assert table["egnc"][0] == table["risam"][0] < min(table["gnc-tls"][0], table["gnc-gm"][0])
+
+
 def test_false_loops_notebook_records_its_solve_for_rerun(run_notebook):
     """04's recording holds every EGNC stage (as many as its table counts) and the false loops rejected."""
     notebook, _ = run_notebook("04_false_loops.ipynb")
