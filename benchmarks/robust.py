@@ -21,8 +21,9 @@
 - `gnc` (`_lib/gtsam_gnc.py`): GTSAM's `GncLMOptimizer` on g2o files, each in a child killed at the
   limit: status, final error, loops with weight < 0.5.
 - `gtsam-bridge` (`_lib/gtsam_bridge.py`): `egnc.from_gtsam` on every shared file (cost equal to
-  GTSAM's, rejected sets equal to the g2o path's, conversion time against the solve) and two
-  robots from GTSAM objects (M3500 cut in two, random and consistent false inter-robot loops).
+  GTSAM's, rejected sets equal to the g2o path's, conversion time against the solve) and
+  graphs cut in robots, from GTSAM objects (M3500 in two and in three, sphere2500 in two; random
+  and consistent false inter-robot loops).
 
 The corrupted grid (false loop closures, precision and recall, riSAM and GTSAM side by side) is
 `egnc-bench`; the time robustness costs is `robust_speed.py`.
@@ -76,11 +77,11 @@ def parser() -> argparse.ArgumentParser:
     gnc.add_argument("--loss", choices=("gm", "tls"), default="tls", help="GNC-GM or GNC-TLS (default tls)")
     gnc.add_argument("--time-limit", type=float, default=600.0, help="seconds per file")
 
-    bridge = commands.add_parser("gtsam-bridge", help="egnc.from_gtsam on shared files and two robots")
+    bridge = commands.add_parser("gtsam-bridge", help="egnc.from_gtsam on shared files and graphs cut in robots")
     bridge.add_argument("--data-dir", type=Path, default=SHARED_DATASETS)
     bridge.add_argument("--files", default=CLEAN_FILES, help="comma-separated dataset names (default: all but cubicle)")
     bridge.add_argument("--percent", default="0,30", help="false loops added to each file, in %% (0: as given)")
-    bridge.add_argument("--no-files", action="store_true", help="only the two-robot table")
+    bridge.add_argument("--no-files", action="store_true", help="only the robots table")
     bridge.add_argument("--no-robots", action="store_true", help="only the shared-file table")
 
     gnss = commands.add_parser("gnss", help="GNSS fixes with multipath outliers and false loops, egnc and GTSAM")

@@ -23,6 +23,8 @@ timelines, written to an `.rrd` file or streamed to a running viewer, also insid
 - `recording(path, connect)`: a recording that writes `path` atomically (the file is complete or
   not there: it is written to a temporary and renamed when the block succeeds) and/or streams to
   the viewer at `connect`.
+- `notebook_viewer(path)`: the viewer inside a notebook cell, showing a recorded `.rrd` file (the
+  `rerun-notebook` package, which the `rerun` extra brings).
 
 Positions are the poses' translations (`(N, 2)` or `(N, 3)`), so a 3D graph is drawn in 3D. Rerun
 is imported inside the functions: `import egnc.rerun` works without it, and a function called
@@ -35,7 +37,7 @@ import contextlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -55,6 +57,7 @@ __all__ = [
     "OnlineRecorder",
     "StageRecorder",
     "log_result",
+    "notebook_viewer",
     "recording",
     "require_rerun",
 ]
@@ -125,6 +128,34 @@ def recording(path: str | Path | None = None, connect: str | None = None) -> Ite
                 ) from None
             finally:
                 stream.disconnect()  # closes the file before it is renamed
+
+
+def notebook_viewer(path: str | Path, *, width: int | Literal["auto"] = "auto", height: int = 480) -> Any:
+    """A Rerun viewer widget for a notebook cell that shows the recording in the `.rrd` file at `path`.
+
+    The file's chunks are sent to a new recording the widget listens to, so the viewer shows
+    exactly what the file holds (`recording(path)` wrote it; `egnc-solve --rerun` too). Display
+    it by ending a cell with it, or with its `display()`.
+
+    Args:
+        path: the `.rrd` file.
+        width: pixels, or `"auto"`: the cell's width.
+        height: pixels.
+
+    Raises:
+        EgncError: the Rerun SDK or its notebook widget (`rerun-notebook`) is not installed.
+    """
+    rr = require_rerun()
+    from rerun.chunk import RrdReader
+    from rerun.notebook import HAS_NOTEBOOK, Viewer
+
+    if not HAS_NOTEBOOK:
+        raise EgncError(f"a viewer inside a notebook needs the rerun-notebook package: {INSTALL_HINT}")
+    stream = rr.RecordingStream(APPLICATION_ID)
+    viewer = Viewer(width=width, height=height, recording=stream)  # the widget is the stream's sink
+    stream.send_chunks(RrdReader(Path(path)).stream())
+    stream.flush()
+    return viewer
 
 
 def _positions(poses: np.ndarray) -> np.ndarray:

@@ -9,7 +9,8 @@ import pytest
 
 import egnc
 from egnc.datasets import grid_world
-from egnc.datasets.two_robots import GROUP_FALSE, SYMBOL_B, TRUE_LOOP, symbol_id, two_robots
+from egnc.datasets.two_robots import GROUP_FALSE, RANDOM_FALSE, SYMBOL_B, TRUE_LOOP, robots, symbol_id, two_robots
+from egnc.errors import EgncError
 from egnc.nonlinear.factors import to_matrices
 from egnc.robust.gnc import GncOptions
 from egnc.robust.parts import part_groups
@@ -36,13 +37,31 @@ def test_two_robots_keep_their_own_edges_and_b_starts_in_its_own_frame(world):
     assert not robots.graph.is_odometry[robots.is_inter_robot].any()
 
 
+def test_three_robots_each_start_in_their_own_frame_and_are_joined_pair_by_pair(world):
+    graph, reference = world
+    cut = robots(graph, reference, splits=(200, 400), false_percent=30, seed=3)
+    assert np.array_equal(np.bincount(cut.robot), [200, 200, 200])
+    assert np.array_equal(cut.graph.vertex_ids, np.concatenate([symbol_id(c, np.arange(200)) for c in "abc"]))
+    assert np.allclose(cut.graph.poses[[200, 400]], 0.0)  # b0 and c0 at the identity
+    pairs = {tuple(sorted(pair)) for pair in cut.robot[cut.graph.edges[cut.kinds == TRUE_LOOP]].tolist()}
+    assert pairs == {(0, 1), (0, 2), (1, 2)}
+    assert (cut.robot[cut.graph.edges[cut.kinds == RANDOM_FALSE, 0]] == 0).all()  # random false loops start at a
+    own = cut.graph.edges[cut.kinds == 0]
+    assert (cut.robot[own[:, 0]] == cut.robot[own[:, 1]]).all()  # the other edges stay within a robot
+    result = _solve(cut.graph)
+    assert result.inliers[cut.kinds == TRUE_LOOP].all() and not result.inliers[cut.is_false].any()
+    with pytest.raises(EgncError, match="splits must increase"):
+        robots(graph, reference, splits=(400, 200))
+
+
 def test_a_consistent_false_group_smaller_than_the_true_loops_is_rejected_whole_with_a_warning(world):
     graph, reference = world
     robots = two_robots(graph, reference, true_loops=30, false_group=12, seed=2)
     result = _solve(robots.graph)
     assert result.inliers[robots.kinds == TRUE_LOOP].all()
     assert not result.inliers[robots.kinds == GROUP_FALSE].any()
-    assert any("groups that disagree" in text for text in result.warnings)
+    (warning,) = [text for text in result.warnings if "groups that disagree" in text]
+    assert "between robot a (a0 to a299) and robot b (b0 to b299)" in warning  # the ids are GTSAM Symbols
 
 
 def test_the_groups_are_the_true_loops_and_the_false_group(world):

@@ -146,3 +146,14 @@ def test_rerun_import_egnc_does_not_import_rerun():
     code = "import egnc, egnc.rerun, egnc.cli.solve, sys; print('rerun' in sys.modules)"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
     assert done.stdout.strip() == "False"
+
+
+def test_rerun_notebook_viewer_names_the_widget_it_needs(rerun_egnc, tmp_path, monkeypatch):
+    import rerun.notebook
+
+    path = tmp_path / "run.rrd"
+    with rerun_egnc.recording(path) as stream:
+        rerun_egnc.log_result(egnc.solve(read_g2o(DATASETS / "grid2d.g2o")), stream)
+    monkeypatch.setattr(rerun.notebook, "HAS_NOTEBOOK", False)  # as without rerun-notebook installed
+    with pytest.raises(egnc.EgncError, match="rerun-notebook package: pip install 'egnc\\[rerun\\]'"):
+        rerun_egnc.notebook_viewer(path)

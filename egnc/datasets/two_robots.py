@@ -1,18 +1,20 @@
-"""Two robots from one pose graph: a trajectory cut in two, joined only by inter-robot loops.
+"""Two robots (or more) from one pose graph: a trajectory cut in pieces, joined only by inter-robot loops.
 
-The first `split` poses are robot `a`, the rest robot `b`; their vertex ids are GTSAM
-`Symbol('a', k)` and `Symbol('b', k)` keys as int64 (`egnc.interop.gtsam`), so each robot's
-odometry is still consecutive ids. The odometry edge across the cut is dropped; the loops within a
-robot stay; the loops across the cut are the true inter-robot loops (`true_loops` of them kept,
-drawn by the seed). Robot `b`'s guess is in its own frame: its first pose at the identity, as a
-robot that starts without knowing where the other is.
+`two_robots`: the first `split` poses are robot `a`, the rest robot `b`; `robots` cuts at several
+rows (`splits`) into robots `a`, `b`, `c`, ... Their vertex ids are GTSAM `Symbol('a', k)`,
+`Symbol('b', k)`, ... keys as int64 (`egnc.graph.symbols`), so each robot's odometry is still
+consecutive ids. The odometry edges across the cuts are dropped; the loops within a robot stay;
+the loops across a cut (between any two robots) are the true inter-robot loops (`true_loops` of
+them kept, drawn by the seed). Each robot but `a` has its guess in its own frame: its first pose
+at the identity, as a robot that starts without knowing where the others are.
 
 False inter-robot loops of two kinds are added:
 
-- `false_percent`: random pairs `(a_i, b_j)` measuring the identity with riSAM's covariance
-  (`egnc.datasets.false_loops`), so that that share of the inter-robot loops is false;
+- `false_percent`: random pairs `(a_i, x_j)` between robot `a` and another robot, measuring the
+  identity with riSAM's covariance (`egnc.datasets.false_loops`), so that that share of the
+  inter-robot loops is false;
 - `false_group`: a consistent false group, as perceptual aliasing makes: every member measures
-  the relative pose the two robots would have if `b`'s frame were moved by one wrong rigid
+  the relative pose robots `a` and `b` would have if `b`'s frame were moved by one wrong rigid
   motion `W` (`Z = X_ai^-1 W X_bj`, exactly, at the reference poses), between poses that are
   within `group_radius` metres of each other under that wrong alignment. The group agrees with
   itself and disagrees with the true inter-robot loops.
@@ -29,9 +31,10 @@ import numpy as np
 from egnc.datasets.false_loops import FALSE_LOOP_COVARIANCE, false_loop_count
 from egnc.errors import EgncError
 from egnc.graph import PoseGraph
+from egnc.graph.symbols import symbol_id
 from egnc.nonlinear.factors import from_matrices, group_of, to_matrices
 
-__all__ = ["SYMBOL_A", "SYMBOL_B", "TwoRobots", "symbol_id", "two_robots"]
+__all__ = ["SYMBOL_A", "SYMBOL_B", "Robots", "robots", "symbol_id", "two_robots"]
 
 SYMBOL_A, SYMBOL_B = "a", "b"
 """The `Symbol` characters of the two robots."""
@@ -40,30 +43,27 @@ TRUE_LOOP, RANDOM_FALSE, GROUP_FALSE = 1, 2, 3
 """Codes of `TwoRobots.kinds` for inter-robot loops (0: an edge of one robot)."""
 
 
-def symbol_id(character: str, index: np.ndarray | int) -> np.ndarray:
-    """The int64 id of GTSAM's `Symbol(character, index)` key (character in the top 8 bits)."""
-    return (np.int64(ord(character)) << np.int64(56)) + np.asarray(index, dtype=np.int64)
-
-
 @dataclass(frozen=True, eq=False)
-class TwoRobots:
-    """A two-robot graph and its labels.
+class Robots:
+    """A multi-robot graph and its labels.
 
     Attributes:
-        graph: the two robots' graph (ids `symbol_id`), `b`'s guess in its own frame.
-        reference: `(N, P)` reference poses of both robots in `a`'s frame (rows as `graph`'s).
+        graph: the robots' graph (ids `symbol_id`), each robot's guess but `a`'s in its own frame.
+        reference: `(N, P)` reference poses of every robot in `a`'s frame (rows as `graph`'s).
+        robot: `(N,)` int, each row's robot (0 for `a`, 1 for `b`, ...).
         kinds: `(E,)` int8: 0 an edge of one robot, `TRUE_LOOP`, `RANDOM_FALSE`, `GROUP_FALSE`.
         wrong_motion: `(n, n)` the rigid motion `W` of `b`'s frame the consistent group implies.
     """
 
     graph: PoseGraph
     reference: np.ndarray
+    robot: np.ndarray
     kinds: np.ndarray
     wrong_motion: np.ndarray
 
     @property
     def is_inter_robot(self) -> np.ndarray:
-        """`(E,)` bool: the loops between the two robots."""
+        """`(E,)` bool: the loops between two robots."""
         return self.kinds > 0
 
     @property
@@ -72,48 +72,54 @@ class TwoRobots:
         return self.kinds >= RANDOM_FALSE
 
 
-def two_robots(
+def two_robots(graph: PoseGraph, reference: np.ndarray, *, split: int | None = None, **options) -> Robots:
+    """Cut `graph` in robots `a` (the first `split` rows, default half) and `b`: `robots` with one cut."""
+    return robots(graph, reference, splits=(graph.num_poses // 2 if split is None else split,), **options)
+
+
+def robots(
     graph: PoseGraph,
     reference: np.ndarray,
     *,
-    split: int | None = None,
+    splits: tuple[int, ...],
     true_loops: int | None = None,
     false_percent: float = 0.0,
     false_group: int = 0,
     group_radius: float = 3.0,
     wrong_motion: np.ndarray | None = None,
     seed: int = 1,
-) -> TwoRobots:
-    """Cut `graph` in two robots joined by inter-robot loops, some false (module docstring).
+) -> Robots:
+    """Cut `graph` in robots joined by inter-robot loops, some false (module docstring).
 
     Args:
         graph: a one-robot graph whose edges join rows in time order (odometry `k -> k + 1`).
         reference: `(N, P)` its outlier-free optimum (the truth of the false loops' tests).
-        split: the first row of robot `b` (default: half of the poses).
-        true_loops: true inter-robot loops kept (default: every loop across the cut).
+        splits: the first row of robot `b`, of `c`, ..., increasing.
+        true_loops: true inter-robot loops kept (default: every loop across a cut).
         false_percent: share in % of the inter-robot loops that are random false ones.
-        false_group: the size of the consistent false group (0: none).
+        false_group: the size of the consistent false group between `a` and `b` (0: none).
         group_radius: metres between the two poses of a group member under the wrong alignment.
         wrong_motion: `W`, `(n, n)`, default a rotation by 90 degrees about the centre of `b`'s
             reference positions and a shift of 20 metres along x (2D; about z in 3D).
         seed: of `np.random.default_rng`.
     """
     n = graph.num_poses
-    split = n // 2 if split is None else split
-    if not 0 < split < n:
-        raise EgncError(f"two_robots: split must lie in (0, {n}), got {split}")
+    starts = np.array([0, *splits, n])
+    if not (np.diff(starts) > 0).all():
+        raise EgncError(f"robots: splits must increase within (0, {n}), got {list(splits)}")
     rng = np.random.default_rng(seed)
     dim, group = graph.dim, group_of(graph.dim)
     T_ref = to_matrices(dim, np.asarray(reference, dtype=np.float64))
-    in_b = np.arange(n) >= split
-    crosses = in_b[graph.edges[:, 0]] != in_b[graph.edges[:, 1]]
+    robot = np.searchsorted(starts, np.arange(n), side="right") - 1
+    crosses = robot[graph.edges[:, 0]] != robot[graph.edges[:, 1]]
     across = np.flatnonzero(crosses & graph.is_loop_closure)
     if true_loops is not None and true_loops < len(across):
         across = np.sort(rng.choice(across, size=true_loops, replace=False))
     own = np.flatnonzero(~crosses)
-    W = _default_motion(dim, T_ref[split:]) if wrong_motion is None else np.asarray(wrong_motion, dtype=np.float64)
-    random_edges = _random_pairs(rng, split, n, false_loop_count(len(across), false_percent))
-    group_edges = _group_pairs(rng, T_ref, W, split, false_group, group_radius)
+    b_rows = slice(starts[1], starts[2])
+    W = _default_motion(dim, T_ref[b_rows]) if wrong_motion is None else np.asarray(wrong_motion, dtype=np.float64)
+    random_edges = _random_pairs(rng, starts[1], n, false_loop_count(len(across), false_percent))
+    group_edges = _group_pairs(rng, T_ref[: starts[1]], W @ T_ref[b_rows], starts[1], false_group, group_radius)
     group_Z = group.between(T_ref[group_edges[:, 0]], W @ T_ref[group_edges[:, 1]])
     d = graph.tangent_dim
     false_info = np.diag(1.0 / np.asarray(FALSE_LOOP_COVARIANCE[dim]))
@@ -131,9 +137,12 @@ def two_robots(
     inter_kinds = np.repeat([TRUE_LOOP, RANDOM_FALSE, GROUP_FALSE], [len(across), len(random_edges), len(group_edges)])
     order = rng.permutation(len(inter_edges))
     T_guess = to_matrices(dim, graph.poses)
-    T_guess[split:] = np.linalg.inv(T_guess[split]) @ T_guess[split:]  # b's own frame
-    ids = np.concatenate((symbol_id(SYMBOL_A, np.arange(split)), symbol_id(SYMBOL_B, np.arange(n - split))))
-    two = PoseGraph(
+    for first, end in zip(starts[1:-1], starts[2:]):
+        T_guess[first:end] = np.linalg.inv(T_guess[first]) @ T_guess[first:end]  # the robot's own frame
+    ids = np.concatenate(
+        [symbol_id(chr(ord(SYMBOL_A) + r), np.arange(starts[r + 1] - starts[r])) for r in range(len(starts) - 1)]
+    )
+    cut = PoseGraph(
         dim,
         ids,
         from_matrices(dim, T_guess),
@@ -142,7 +151,7 @@ def two_robots(
         np.concatenate((graph.information[own], inter_info[order])),
     )
     kinds = np.concatenate((np.zeros(len(own), dtype=np.int8), inter_kinds[order].astype(np.int8)))
-    return TwoRobots(two, np.asarray(reference, dtype=np.float64), kinds, W)
+    return Robots(cut, np.asarray(reference, dtype=np.float64), robot, kinds, W)
 
 
 def _default_motion(dim: int, T_b: np.ndarray) -> np.ndarray:
@@ -158,7 +167,7 @@ def _default_motion(dim: int, T_b: np.ndarray) -> np.ndarray:
 
 
 def _random_pairs(rng: np.random.Generator, split: int, n: int, count: int) -> np.ndarray:
-    """`(count, 2)` rows `(a_i, b_j)` drawn uniformly, distinct pairs."""
+    """`(count, 2)` distinct rows `(a_i, x_j)`, `a_i` uniform below `split` (robot `a`), `x_j` above."""
     pairs: set[tuple[int, int]] = set()
     while len(pairs) < count:
         pairs.add((int(rng.integers(0, split)), int(rng.integers(split, n))))
@@ -166,19 +175,20 @@ def _random_pairs(rng: np.random.Generator, split: int, n: int, count: int) -> n
 
 
 def _group_pairs(
-    rng: np.random.Generator, T_ref: np.ndarray, W: np.ndarray, split: int, count: int, radius: float
+    rng: np.random.Generator, T_a: np.ndarray, T_b_moved: np.ndarray, b_first: int, count: int, radius: float
 ) -> np.ndarray:
-    """`(count, 2)` rows `(a_i, b_j)` whose positions are within `radius` under `b` moved by `W`."""
+    """`(count, 2)` rows `(a_i, b_j)` whose positions are within `radius` of each other, robot `a`'s
+    reference poses `T_a` against robot `b`'s moved by `W` (`T_b_moved`, rows from `b_first`)."""
     if count == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    dim = T_ref.shape[-1] - 1
-    p_a = T_ref[:split, :dim, dim]
-    p_b = (W @ T_ref[split:])[:, :dim, dim]
+    dim = T_a.shape[-1] - 1
+    p_a = T_a[:, :dim, dim]
+    p_b = T_b_moved[:, :dim, dim]
     close: list[tuple[int, int]] = []
     for j in rng.permutation(len(p_b)):
         near = np.flatnonzero(np.linalg.norm(p_a - p_b[j], axis=1) < radius)
         if len(near):
-            close.append((int(rng.choice(near)), split + int(j)))
+            close.append((int(rng.choice(near)), b_first + int(j)))
         if len(close) == count:
             return np.array(close, dtype=np.int64)
-    raise EgncError(f"two_robots: only {len(close)} pose pairs are within {radius} m under the wrong alignment")
+    raise EgncError(f"robots: only {len(close)} pose pairs are within {radius} m under the wrong alignment")

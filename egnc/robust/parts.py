@@ -35,6 +35,7 @@ from egnc.errors import SolverError
 from egnc.graph import PoseGraph
 from egnc.graph.connectivity import connected_components
 from egnc.graph.priors import Priors
+from egnc.graph.symbols import symbol_characters, vertex_name
 from egnc.nonlinear.factors import group_of, to_matrices
 from egnc.nonlinear.least_squares import Problem, solve_least_squares
 from egnc.robust.kernels import chi2_quantile
@@ -70,12 +71,14 @@ class PartGroups:
 
     Attributes:
         loops: `(L,)` edge indices of the loops between the two parts.
-        moved: `(N,)` bool, the rows of part `q` (the part without row 0 of the pair).
+        anchor: `(N,)` bool, the rows of part `p` (the part of the pair's first row), which stays.
+        moved: `(N,)` bool, the rows of part `q` (the other part of the pair).
         groups: `(L,)` int group of each loop (0 the largest), -1 for a loop in no group.
         motions: `(G, n, n)` the motion `D` of part `q` each group implies.
     """
 
     loops: np.ndarray
+    anchor: np.ndarray
     moved: np.ndarray
     groups: np.ndarray
     motions: np.ndarray
@@ -133,7 +136,7 @@ def part_groups(
     T_i, Z, T_j = _oriented(graph, loops, labels == q, own)
     threshold = AGREEMENT_SCALE * chi2_quantile(quantile, graph.tangent_dim)
     groups, motions = _consensus(graph, loops, T_i, Z, T_j, threshold)
-    return PartGroups(loops, labels == q, groups, motions)
+    return PartGroups(loops, labels == p, labels == q, groups, motions)
 
 
 def _part_maps(graph: PoseGraph, keep: np.ndarray, labels: np.ndarray, poses: np.ndarray, backend: str) -> np.ndarray:
@@ -205,7 +208,7 @@ def part_group_warning(
     accepted = [int(np.count_nonzero(inliers[found.members(g)])) for g in range(found.count)]
     sizes = [len(found.members(g)) for g in range(found.count)]
     used = [g for g in range(found.count) if accepted[g]]
-    where = f"between the parts of vertex {ids[~found.moved][0]} and vertex {ids[found.moved][0]}"
+    where = f"between {_part_name(ids[found.anchor])} and {_part_name(ids[found.moved])}"
     if len(used) > 1:
         groups = ", ".join(f"{accepted[g]} of a group of {sizes[g]}" for g in used)
         return (
@@ -224,3 +227,12 @@ def part_group_warning(
         f"{' and more' if len(members) > 5 else ''}) would place it otherwise; perceptual aliasing makes "
         "such consistent false groups: check them"
     )
+
+
+def _part_name(ids: np.ndarray) -> str:
+    """How a warning names a part of the sorted vertex `ids`: `robot a (a0 to a1749)` when they are
+    GTSAM Symbols of one character (`egnc.graph.symbols`), else `the part of vertex 17`."""
+    characters = np.unique(symbol_characters(ids))
+    if len(characters) == 1 and characters[0]:
+        return f"robot {characters[0]} ({vertex_name(ids[0])} to {vertex_name(ids[-1])})"
+    return f"the part of vertex {vertex_name(ids[0])}"
