@@ -261,7 +261,10 @@ class MapState:
         `(F,)` where the map holds priors (a position prior's is `dim`)."""
         if not self.num_priors:
             return self.settings.d
-        return np.concatenate((np.full(len(self.edges), self.settings.d), self.priors.dims))[factors]
+        dims = np.full(len(factors), self.settings.d)
+        priors = factors >= len(self.edges)
+        dims[priors] = self.priors.dims[factors[priors] - len(self.edges)]
+        return dims
 
     def factor_rows(self, factors: np.ndarray) -> np.ndarray:
         """Sorted pose rows the `factors` (factor indices: edges, then priors) measure."""
