@@ -4,6 +4,9 @@ candidates graduated like new loops or known inliers, the gauge they free, check
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +19,8 @@ from egnc.metrics import ate, precision_recall
 from egnc.nonlinear.factors import from_matrices, to_matrices
 from egnc.online import OnlineSolver
 from egnc.online.replay import replay
+
+DATA = Path(__file__).parents[1] / "datasets"
 
 
 def world(dim: int, num_poses: int = 120, seed: int = 5):
@@ -240,3 +245,33 @@ def test_replayed_priors_in_file_order_and_a_resumed_replay_ends_where_a_whole_o
     np.testing.assert_array_equal(resumed.prior_inliers, whole.prior_inliers)
     rejected = np.isin(moved.graph.prior_factor_index, whole.rejected_priors)
     assert precision_recall(rejected, moved.is_outlier) == (1.0, 1.0)
+
+
+def test_egnc_solve_online_replays_an_egnc_corrupt_gnss_file(tmp_path):
+    corrupted_file, labels = tmp_path / "gnss.g2o", tmp_path / "gnss.labels.json"
+    command = [sys.executable, "-m", "egnc.cli.corrupt", str(DATA / "grid2d.g2o"), "--percent", "10", "--seed", "1"]
+    command += ["--gnss-every", "10", "--gnss-outliers", "20", "--gnss-bursts", "-o", str(corrupted_file)]
+    subprocess.run([*command, "--labels", str(labels), "-q"], check=True, timeout=300)
+    report = tmp_path / "report.json"
+    solve = [sys.executable, "-m", "egnc.cli.solve", str(corrupted_file), "--online", "-q", "--report", str(report)]
+    subprocess.run(solve, check=True, timeout=300, stdin=subprocess.DEVNULL)
+    written, truth = json.loads(report.read_text()), json.loads(labels.read_text())
+    graph = egnc.read_g2o(corrupted_file)
+    assert written["rejected_edges"] == truth["outlier_edges"]
+    expected = graph.prior_factor_index[truth["outlier_priors"]].tolist()
+    assert written["rejected_priors"] == expected and written["online"]["steps"] > 0
+
+
+@pytest.mark.parametrize("bursts", [False, True])
+def test_replay_of_manhattan_with_fixes_false_loops_and_multipath_jumps(dataset_path, bursts):
+    clean = egnc.read_g2o(dataset_path("manhattanOlson3500.g2o"))
+    optimum = egnc.solve(clean, "l2").graph.poses
+    false = add_false_loops(clean, 30, seed=1, reference_poses=optimum)
+    fixes = add_position_priors(false.graph, optimum, every=10, sigma=2.0, seed=1)
+    moved = add_multipath_outliers(fixes, 20, seed=1, bursts=bursts, reference_poses=optimum)
+    result = replay(moved.graph).result
+    rejected_priors = np.isin(moved.graph.prior_factor_index, result.rejected_priors)
+    assert precision_recall(~result.inliers, false.is_outlier) == (1.0, 1.0)
+    assert precision_recall(rejected_priors, moved.is_outlier) == (1.0, 1.0)
+    reference = egnc.solve(fixes.subgraph_edges(~false.is_outlier), "l2").graph.poses
+    assert ate(result.graph.poses, reference, 2, align=False) < 0.5  # in the fixes' frame, unaligned

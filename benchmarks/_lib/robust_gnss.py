@@ -120,7 +120,7 @@ def row(case: Case, clean_s: float, use_gtsam: bool) -> str:
         case.name,
         f"{case.loops:g}",
         f"{case.priors:g}{' bursts' if case.bursts else ''}",
-        *_scores(~result.inliers, rejected_priors, case),
+        *scores(~result.inliers, rejected_priors, case),
         f"{ate(result.graph.poses, case.reference, graph.dim, align=False):.3f}",
         f"{egnc_s:.2f}",
         f"{egnc_s / clean_s:.2f}x",
@@ -128,14 +128,14 @@ def row(case: Case, clean_s: float, use_gtsam: bool) -> str:
     if use_gtsam:
         poses, weights, gtsam_s = gtsam_gnc_tls(graph)
         cells += [
-            *_scores(weights[:E] < 0.5, weights[E:] < 0.5, case),
+            *scores(weights[:E] < 0.5, weights[E:] < 0.5, case),
             f"{ate(poses, case.reference, graph.dim, align=False):.3f}",
             f"{gtsam_s:.2f}",
         ]
     return "| " + " | ".join(cells) + " |"
 
 
-def _scores(rejected_edges: np.ndarray, rejected_priors: np.ndarray, case: Case) -> list[str]:
+def scores(rejected_edges: np.ndarray, rejected_priors: np.ndarray, case: Case) -> list[str]:
     """`P/R` of the loops and of the priors, three decimals."""
     loops = precision_recall(rejected_edges, case.false_edges)
     priors = precision_recall(rejected_priors, case.false_priors)

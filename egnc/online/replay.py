@@ -323,7 +323,6 @@ def replay(
         add_gauge(solver, graph)
     solver.on_update = on_update
     done = resumed_from = solver.steps  # one update per step
-    order = np.concatenate([step.edges for step in steps]) if steps else np.zeros(0, dtype=np.int64)
     last = len(steps) if stop_after is None else min(len(steps), stop_after)
     for step in range(done, last):
         add_step(solver, graph, steps[step], known)
@@ -334,9 +333,7 @@ def replay(
             on_step(done, len(steps), report)
         if path is not None and (done % checkpoint_every == 0 or done == last):
             solver.save(path, meta=settings)
-    inserted = order[: solver.num_edges]
-    prior_order = np.argsort(arrivals, kind="stable")  # prior k was inserted as prior position[k]
-    result = _in_file_order(solver.result(), inserted, prior_order, graph) if done == len(steps) else solver.result()
+    result = _in_file_order(solver.result(), steps, arrivals, graph) if done == len(steps) else solver.result()
     update_ms = solver.update_ms
     return ReplayOutcome(
         result=result,
@@ -450,9 +447,11 @@ def _check_prefix(
         raise EgncError(f"{refuse}: its edge ({i}, {j}){where} differs (edited?); remove it")
 
 
-def _in_file_order(result: Result, inserted: np.ndarray, prior_order: np.ndarray, graph: PoseGraph) -> Result:
-    """`result` (edges and priors in insertion order; `inserted[k]` is the file index of edge k,
-    `prior_order[k]` that of prior k) with edges and priors in file order."""
+def _in_file_order(result: Result, steps: list[ReplayStep], arrivals: np.ndarray, graph: PoseGraph) -> Result:
+    """`result` of the whole replay of `graph` in `steps` (edges and priors in insertion order;
+    `arrivals`: `(K,)` each prior's step) with edges and priors in file order."""
+    inserted = np.concatenate([step.edges for step in steps]) if steps else np.zeros(0, dtype=np.int64)
+    prior_order = np.argsort(arrivals, kind="stable")  # prior k was inserted as prior position[k]
     position = np.empty_like(inserted)
     position[inserted] = np.arange(len(inserted))  # file edge f was inserted as edge position[f]
     prior_position = np.empty_like(prior_order)

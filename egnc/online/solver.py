@@ -58,6 +58,13 @@ Gauge: the pose of the first `add_prior` is held fixed at the prior's value (as 
 does: the only absolute factor is satisfied exactly at the optimum, whatever its covariance);
 without a prior, the first pose added is held fixed where it was placed.
 
+Measurement priors (`add_pose_prior`, `add_position_prior`: GNSS fixes, pose priors) may come at
+any time (`egnc.online.priors`): candidates, graduated like new loops with their chi-square tests
+at their own dimension, or known inliers (`known_inliers="odometry,priors"`, as `egnc.solve`
+names them). Until they pin the map, the first pose stays held and the map is moved onto the
+fixes as they come (the batch's trimmed fit); the update whose priors pin it moves it once more
+and frees the held pose, unless `add_prior` holds one.
+
 `OnlineSolver` runs the protocol over parts that each do one job: `egnc.online.intake` checks
 what the `add_*` calls give and holds it until the update, `egnc.online.state` is the graph and
 its estimate, `egnc.online.graduation` (over `egnc.online.stage`) graduates an update's loops,
