@@ -7,7 +7,7 @@
     python benchmarks/online.py isam2 FILE.g2o [--relinearize-threshold 0.1] [--relinearize-skip 10]
         [--reference] [--output ESTIMATE.g2o]
     python benchmarks/online.py gnss [--files manhattanOlson3500,sphere2500,city10000] [--loops 0,10,30]
-        [--priors 0,10,20] [--every 10] [--sigma 2] [--seed 1] [--json rows.jsonl]
+        [--priors 0,10,20] [--every 10] [--sigma 2] [--seed 1] [--baseline] [--json rows.jsonl]
     nice -n 10 python benchmarks/online.py vs-isam2 [--datasets manhattanOlson3500,sphere2500,city10000]
         [--percent 30] [--seed 1] [--repeats 1] [--relinearize-skips 10] [--egnc-timeout 1200]
         [--isam2-timeout 600] [--region-hops N] [--boundary-share S] [--decide-at-arrival] [--json rows.jsonl]
@@ -70,6 +70,7 @@ def parser() -> argparse.ArgumentParser:
     gnss.add_argument("--every", type=int, default=10, help="a fix every K poses")
     gnss.add_argument("--sigma", type=float, default=2.0, help="fix noise per coordinate, metres")
     gnss.add_argument("--seed", type=int, default=1)
+    gnss.add_argument("--baseline", action="store_true", help="also replay each graph without its fixes (time ratio)")
     gnss.add_argument("--json", type=Path, help="append one JSON line per row here")
 
     isam2 = commands.add_parser("isam2", help="GTSAM's ISAM2 replaying one g2o file; one JSON line")
