@@ -6,6 +6,8 @@
         [--rel-cost-tol TOL] [--linear-solver auto] [--repeats N] [--json rows.jsonl]
     python benchmarks/online.py isam2 FILE.g2o [--relinearize-threshold 0.1] [--relinearize-skip 10]
         [--reference] [--output ESTIMATE.g2o]
+    python benchmarks/online.py gnss [--files manhattanOlson3500,sphere2500,city10000] [--loops 0,10,30]
+        [--priors 0,10,20] [--every 10] [--sigma 2] [--seed 1] [--baseline] [--json rows.jsonl]
     nice -n 10 python benchmarks/online.py vs-isam2 [--datasets manhattanOlson3500,sphere2500,city10000]
         [--percent 30] [--seed 1] [--repeats 1] [--relinearize-skips 10] [--egnc-timeout 1200]
         [--isam2-timeout 600] [--region-hops N] [--boundary-share S] [--decide-at-arrival] [--json rows.jsonl]
@@ -13,6 +15,9 @@
 - `replay` (the default; `_lib/online_replay.py`): corrupted graphs replayed through
   `egnc.online.replay` with egnc's and riSAM's schedules in one process: precision, recall and ATE
   of the final and running decisions, iterations, total time and update latency.
+- `gnss` (`_lib/online_gnss.py`): `benchmarks/robust.py gnss`'s cases (GNSS fixes with multipath
+  jumps, false loops) replayed online: P and R of the loops and of the priors, ATE without
+  alignment, update time and latency, and the batch solve's time.
 - `isam2` (`_lib/isam2_replay.py`): GTSAM's ISAM2 (non-robust) replaying one g2o file in the same
   steps; one JSON line of times, latency, cost and peak memory.
 - `vs-isam2` (`_lib/online_vs_isam2.py`): `egnc-solve --online` on the corrupted graph against
@@ -29,7 +34,7 @@ from pathlib import Path
 
 from _lib.cli import with_default_command
 
-COMMANDS = ("replay", "isam2", "vs-isam2")
+COMMANDS = ("replay", "gnss", "isam2", "vs-isam2")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -57,6 +62,16 @@ def parser() -> argparse.ArgumentParser:
     replay.add_argument("--linear-solver", default="auto")
     replay.add_argument("--repeats", type=int, default=1, help="replays of each method per case, alternating")
     replay.add_argument("--json", type=Path, help="append one JSON line per row here")
+
+    gnss = commands.add_parser("gnss", help="GNSS fixes with multipath outliers and false loops, replayed online")
+    gnss.add_argument("--files", default="manhattanOlson3500,sphere2500,city10000")
+    gnss.add_argument("--loops", default="0,10,30", help="false-loop shares, percent")
+    gnss.add_argument("--priors", default="0,10,20", help="multipath shares of the fixes, percent")
+    gnss.add_argument("--every", type=int, default=10, help="a fix every K poses")
+    gnss.add_argument("--sigma", type=float, default=2.0, help="fix noise per coordinate, metres")
+    gnss.add_argument("--seed", type=int, default=1)
+    gnss.add_argument("--baseline", action="store_true", help="also replay each graph without its fixes (time ratio)")
+    gnss.add_argument("--json", type=Path, help="append one JSON line per row here")
 
     isam2 = commands.add_parser("isam2", help="GTSAM's ISAM2 replaying one g2o file; one JSON line")
     isam2.add_argument("file", help="a 2D or 3D g2o file with VERTEX lines")
@@ -89,6 +104,10 @@ def main(argv: list[str] | None = None) -> int:
 
         threshold, skip = args.relinearize_threshold, args.relinearize_skip
         return isam2_replay.report(args.file, threshold, skip, args.reference, args.output)
+    if args.command == "gnss":
+        from _lib import online_gnss
+
+        return online_gnss.report(args)
     if args.command == "vs-isam2":
         from _lib import online_vs_isam2
 

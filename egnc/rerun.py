@@ -404,13 +404,14 @@ class OnlineRecorder:
     def _hold_new_loops(self, report: UpdateReport, inliers: np.ndarray) -> None:
         """The new loops' `mu` per stage (timeline `stage`, from 0) and one line of text."""
         rows = self._rows
-        for s, mu in enumerate(report.mu_history):
+        history = report.mu_history[:, : len(report.new_loops)]  # the new loops' columns (priors follow)
+        for s, mu in enumerate(history):
             rows.mu_steps.append(report.step)
             rows.mu_stages.append(s)
             rows.mu.append(mu)
         kept = inliers[report.new_loops]
         how = "decided at arrival" if report.decided_at_arrival else f"{len(report.stages)} stages"
-        mu = "; ".join(" -> ".join(f"{value:.3g}" for value in column) for column in report.mu_history.T)
+        mu = "; ".join(" -> ".join(f"{value:.3g}" for value in column) for column in history.T)
         rows.text_steps.append(report.step)
         rows.text.append(
             f"update {report.step}: loop closures {report.new_loops.tolist()}, {how}, mu {mu or 'unchanged'};"

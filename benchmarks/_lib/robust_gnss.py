@@ -136,7 +136,7 @@ def row(case: Case, clean_s: float, gtsam_limit_s: float) -> str:
         case.name,
         f"{case.loops:g}",
         f"{case.priors:g}{' bursts' if case.bursts else ''}",
-        *_scores(~result.inliers, rejected_priors, case),
+        *scores(~result.inliers, rejected_priors, case),
         f"{ate(result.graph.poses, case.reference, graph.dim, align=False):.3f}",
         f"{egnc_s:.2f}",
         f"{egnc_s / clean_s:.2f}x",
@@ -147,14 +147,14 @@ def row(case: Case, clean_s: float, gtsam_limit_s: float) -> str:
             return "| " + " | ".join([*cells, outcome.status, "", "", f"{outcome.wall_s:.0f}"]) + " |"
         poses, weights, gtsam_s = outcome.value
         cells += [
-            *_scores(weights[:E] < 0.5, weights[E:] < 0.5, case),
+            *scores(weights[:E] < 0.5, weights[E:] < 0.5, case),
             f"{ate(poses, case.reference, graph.dim, align=False):.3f}",
             f"{gtsam_s:.2f}",
         ]
     return "| " + " | ".join(cells) + " |"
 
 
-def _scores(rejected_edges: np.ndarray, rejected_priors: np.ndarray, case: Case) -> list[str]:
+def scores(rejected_edges: np.ndarray, rejected_priors: np.ndarray, case: Case) -> list[str]:
     """`P/R` of the loops and of the priors, three decimals."""
     loops = precision_recall(rejected_edges, case.false_edges)
     priors = precision_recall(rejected_priors, case.false_priors)

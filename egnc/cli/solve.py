@@ -342,7 +342,8 @@ def _run(args: argparse.Namespace, plan: OutputPlan, stream=None) -> tuple[Resul
             result, outcome = _solve(args, graph, known_inliers, stream)
         except EgncError as error:
             # a replay numbers the edges in the order it adds them (`replay_steps`), a batch solve in file order
-            order = np.concatenate(replay_steps(graph, _mask(known_inliers, graph))) if args.online else None
+            edges_known = _mask(known_inliers, graph)[: graph.num_edges]
+            order = np.concatenate(replay_steps(graph, edges_known)) if args.online else None
             raise located(error, args.input, graph, [args.checkpoint], order, resumed) from None
     _require_finite(result, args.input)
     report = report_dict(result, read_notes + _warning_notes(caught[read_count:]), outcome)
@@ -483,10 +484,8 @@ def is_irl(path: Path) -> bool:
 
 
 def _mask(known_inliers: str | np.ndarray, graph: PoseGraph) -> np.ndarray:
-    """`(E,)` bool known-inlier edges from the `--known-inliers` choice."""
-    if isinstance(known_inliers, str):
-        return known_inlier_mask(graph, known_inliers)[: graph.num_edges]
-    return known_inliers[: graph.num_edges]
+    """`(E,)` bool known-inlier edges, or `(E + K,)` edges then priors, from the `--known-inliers` choice."""
+    return known_inlier_mask(graph, known_inliers)
 
 
 def _same_path(a: Path, b: Path) -> bool:

@@ -37,6 +37,12 @@ SETTINGS = (
 )  # fmt: skip
 """The keys of a checkpoint's settings (a version 1 checkpoint has all but `digest`)."""
 
+OPTIONAL_SETTINGS = {"known_inliers": "odometry"}
+"""Settings a checkpoint written before they existed lacks, with the value it was written under."""
+
+PRIOR_ARRAYS = ("prior_rows", "prior_kinds", "prior_measurements", "prior_information")
+"""The arrays of the measurement priors (`egnc.online.priors`); a checkpoint without them holds none."""
+
 RIGID_TOLERANCE = 1e-6
 """Largest entry of `R^T R - I` a checkpoint's pose or measurement rotation `R` may have (they are
 orthonormal to about 1e-12 after many updates)."""
@@ -53,7 +59,8 @@ def write_checkpoint(path: Path, settings: dict, arrays: dict[str, np.ndarray]) 
         TypeError, ValueError: `settings` is not JSON data (nothing is written).
         EgncError: the file cannot be written.
     """
-    assert set(settings) == set(SETTINGS) - {"digest"}, "a checkpoint's settings are SETTINGS but its digest"
+    expected = set(SETTINGS) - {"digest"}
+    assert expected <= set(settings) <= expected | set(OPTIONAL_SETTINGS), "a checkpoint's settings are SETTINGS"
     text = json.dumps({**settings, "digest": content_digest(settings, arrays)})
     with atomic_binary_file(path) as out:
         np.savez(out, settings=np.array(text), **arrays)  # type: ignore[arg-type]
@@ -102,7 +109,7 @@ def read_checkpoint(path: Path) -> tuple[dict, dict[str, np.ndarray]]:
             f"{path}: the checkpoint's content does not match its digest: it was changed after egnc wrote it;"
             " remove it and replay from the start"
         )
-    return settings, arrays
+    return {**OPTIONAL_SETTINGS, **settings}, arrays
 
 
 def content_digest(settings: dict, arrays: dict[str, np.ndarray]) -> str:
@@ -123,16 +130,22 @@ def _inconsistency(settings: dict, arrays: dict[str, np.ndarray]) -> str:
     if isinstance(dim, bool) or dim not in (2, 3):
         return f"dim is {dim!r}, expected 2 or 3"
     n, p, d = dim + 1, POSE_SIZE[dim], TANGENT_SIZE[dim]  # matrix size, measurement and tangent sizes
-    missing = [name for name in (*_expected_shapes(0, 0, 0, n, p, d), "converged_trusted") if name not in arrays]
+    present = [name for name in PRIOR_ARRAYS if name in arrays]
+    if present and len(present) < len(PRIOR_ARRAYS):
+        return f"no {', '.join(name for name in PRIOR_ARRAYS if name not in arrays)}"
+    expected = _expected_shapes(0, 0, 0, 0, n, p, d)
+    missing = [name for name in (*expected, "converged_trusted") if name not in arrays and name not in PRIOR_ARRAYS]
     if missing:
         return f"no {', '.join(missing)}"
-    # The poses, edges and updates are counted by these arrays; the others must agree.
-    counted = ("vertex_ids", "edges", "update_ms")
-    scalar = [name for name in counted if not arrays[name].ndim]
+    # The poses, edges, priors and updates are counted by these arrays; the others must agree.
+    counted = ("vertex_ids", "edges", "prior_rows", "update_ms")
+    scalar = [name for name in counted if name in arrays and not arrays[name].ndim]
     if scalar:
         return f"{scalar[0]} is a single number, expected an array"
-    num_poses, num_edges, steps = (len(arrays[name]) for name in counted)
-    for name, (shape, kind) in _expected_shapes(num_poses, num_edges, steps, n, p, d).items():
+    num_poses, num_edges, num_priors, steps = (len(arrays.get(name, ())) for name in counted)
+    for name, (shape, kind) in _expected_shapes(num_poses, num_edges, num_priors, steps, n, p, d).items():
+        if name not in arrays:  # the priors' arrays of a checkpoint without priors
+            continue
         array = arrays[name]
         if array.shape != shape or array.dtype.kind not in kind:
             return f"{name} is {array.dtype} {array.shape}, expected {_kind_name(kind)} {shape}"
@@ -149,6 +162,10 @@ def _inconsistency(settings: dict, arrays: dict[str, np.ndarray]) -> str:
     edges = arrays["edges"]
     if num_edges and (edges.min() < 0 or edges.max() >= num_poses):
         return f"edges name poses outside 0..{num_poses - 1}"
+    if num_priors:
+        problem = _prior_inconsistency(arrays, num_poses, d)
+        if problem:
+            return problem
     for name in ("mu", "mu_init"):
         if np.any((arrays[name] < 0.0) | (arrays[name] > 1.0)):
             return f"{name} is outside [0, 1]"
@@ -174,11 +191,25 @@ def _inconsistency(settings: dict, arrays: dict[str, np.ndarray]) -> str:
     return ""
 
 
+def _prior_inconsistency(arrays: dict[str, np.ndarray], num_poses: int, d: int) -> str:
+    """What does not fit in a checkpoint's measurement priors, or ""."""
+    rows, kinds = arrays["prior_rows"], arrays["prior_kinds"]
+    if rows.min() < 0 or rows.max() >= num_poses:
+        return f"prior_rows name poses outside 0..{num_poses - 1}"
+    if np.any((kinds != 0) & (kinds != 1)):
+        return "prior_kinds holds a kind other than 0 (pose) and 1 (position)"
+    if not np.all(np.isfinite(arrays["prior_measurements"])) or not np.all(np.isfinite(arrays["prior_information"])):
+        return "the priors hold a non-finite number"
+    return ""
+
+
 def _expected_shapes(
-    num_poses: int, num_edges: int, steps: int, n: int, p: int, d: int
+    num_poses: int, num_edges: int, num_priors: int, steps: int, n: int, p: int, d: int
 ) -> dict[str, tuple[tuple[int, ...], str]]:
-    """Each array's shape and NumPy dtype kinds, for `num_poses` poses, `num_edges` edges and `steps`
-    updates; `n`: pose matrix size, `p`: measurement vector size, `d`: tangent dimension."""
+    """Each array's shape and NumPy dtype kinds, for `num_poses` poses, `num_edges` edges,
+    `num_priors` measurement priors and `steps` updates; `n`: pose matrix size, `p`: measurement
+    vector size, `d`: tangent dimension. The per-factor arrays hold the edges, then the priors."""
+    factors = num_edges + num_priors
     return {
         "vertex_ids": ((num_poses,), "iu"),
         "T": ((num_poses, n, n), "f"),
@@ -187,10 +218,14 @@ def _expected_shapes(
         "measurements": ((num_edges, p), "f"),
         "Z_inv": ((num_edges, n, n), "f"),
         "information": ((num_edges, d, d), "f"),
-        "robust": ((num_edges,), "b"),
-        "mu": ((num_edges,), "f"),
-        "mu_init": ((num_edges,), "f"),
-        "r": ((num_edges,), "f"),
+        "robust": ((factors,), "b"),
+        "mu": ((factors,), "f"),
+        "mu_init": ((factors,), "f"),
+        "r": ((factors,), "f"),
+        "prior_rows": ((num_priors,), "iu"),
+        "prior_kinds": ((num_priors,), "iu"),
+        "prior_measurements": ((num_priors, p), "f"),
+        "prior_information": ((num_priors, d, d), "f"),
         "update_ms": ((steps,), "f"),
         "update_iterations": ((steps,), "iu"),
     }

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from egnc.graph import PoseGraph
+from egnc.graph.priors import Priors
 from egnc.nonlinear.factors import from_matrices, to_matrices
 
 TRIM_FACTOR = 3.0
@@ -40,8 +41,20 @@ def align_to_priors(graph: PoseGraph, poses: np.ndarray) -> np.ndarray:
     priors = graph.priors
     if not len(priors):
         return poses
-    dim = graph.dim
-    p = poses[priors.rows, :dim]
+    M = frame_motion(priors, poses[priors.rows, : graph.dim])
+    return from_matrices(graph.dim, M @ to_matrices(graph.dim, poses))  # a motion of the world frame
+
+
+def frame_motion(priors: Priors, positions: np.ndarray) -> np.ndarray:
+    """`(n, n)` the rigid motion of the world frame that puts the priors' poses, at `positions`
+    `(K, dim)` (metres), onto the priors' measured positions: the trimmed fit (module docstring).
+
+    Args:
+        priors: at least one prior (pose and position priors alike give a position).
+        positions: `(K, dim)` the current positions of the priors' poses, one row per prior.
+    """
+    dim = priors.dim
+    p = positions
     q = priors.measurements[:, :dim]
     keep = np.ones(len(p), dtype=bool)
     rotate = len(np.unique(priors.rows)) >= dim
@@ -51,7 +64,7 @@ def align_to_priors(graph: PoseGraph, poses: np.ndarray) -> np.ndarray:
         keep = distance <= TRIM_FACTOR * np.median(distance) + 1e-9
     M = np.eye(dim + 1)
     M[:dim, :dim], M[:dim, dim] = R, t
-    return from_matrices(dim, M @ to_matrices(dim, poses))  # a motion of the world frame
+    return M
 
 
 def _fit(p: np.ndarray, q: np.ndarray, rotate: bool) -> tuple[np.ndarray, np.ndarray]:

@@ -64,6 +64,12 @@ class PriorFactors:
     def __len__(self) -> int:
         return len(self.rows)
 
+    def subset(self, keep: np.ndarray, rows: np.ndarray | None = None) -> PriorFactors:
+        """The priors `keep` selects (`(K,)` bool mask or indices), on the pose rows `rows` of
+        another numbering (e.g. a local problem's; default: their own)."""
+        rows = self.rows[keep] if rows is None else rows
+        return PriorFactors(self.dim, rows, self.is_pose[keep], self.Z_inv[keep], self.z[keep], self.information[keep])
+
     @property
     def tangent_dim(self) -> int:
         """Tangent dimension d: 3 in 2D, 6 in 3D."""

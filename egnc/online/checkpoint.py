@@ -1,8 +1,10 @@
 """The online solver's state to and from a checkpoint file (`egnc.io.checkpoint`'s format).
 
 A checkpoint holds the solver's settings (JSON: its arguments, gauge, update count) and the map's
-arrays. The factorized map of `OnlineOptions.decide_at_arrival` is not stored: it is rebuilt on
-load from the state it was factorized at (its first poses and edges, and its trusted edges).
+arrays, its measurement priors' among them (a checkpoint written before priors holds none and
+loads as one). The factorized map of `OnlineOptions.decide_at_arrival` is not stored: it is
+rebuilt on load from the state it was factorized at (its first poses and edges, and its trusted
+edges).
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ def write_state(
         "last_status": log.last_status,
         "converged_poses": None if converged is None else converged.num_poses,
         "meta": {} if meta is None else meta,
+        "known_inliers": settings.known_inliers,
     }
     arrays = {
         "vertex_ids": state.vertex_ids,
@@ -78,6 +81,14 @@ def write_state(
         "update_ms": np.array(log.update_ms),
         "update_iterations": np.array(log.update_iterations, dtype=np.int64),
     }
+    priors = state.priors
+    if len(priors):  # a map without priors writes the arrays it always did
+        arrays.update(
+            prior_rows=priors.rows,
+            prior_kinds=priors.kinds,
+            prior_measurements=priors.measurements,
+            prior_information=priors.information,
+        )
     try:
         write_checkpoint(Path(path), saved, arrays)
     except (TypeError, ValueError) as error:
@@ -104,6 +115,7 @@ def solver_arguments(saved: dict) -> dict:
         "options": SolverOptions(**saved["options"]),
         "gnc_options": GncOptions(**saved["gnc_options"]),
         "online_options": OnlineOptions(**saved["online_options"]),
+        "known_inliers": saved["known_inliers"],
     }
 
 
@@ -118,6 +130,15 @@ def restore_state(saved: dict, arrays: dict[str, np.ndarray], state: MapState, l
     state.loops = np.flatnonzero(state.robust)
     state.r = arrays["r"]
     state.gauge, state.has_prior = saved["gauge"], saved["has_prior"]
+    if "prior_rows" in arrays:
+        state.priors.append(
+            arrays["prior_rows"].astype(np.int64),
+            arrays["prior_kinds"].astype(np.int8),
+            arrays["prior_measurements"],
+            arrays["prior_information"],
+        )
+    # The priors free the held pose once they pin the map, and only then (`egnc.online.priors`).
+    state.gauge_free = not state.has_prior and state.priors.pin_the_map()
     log.update_ms = arrays["update_ms"].tolist()
     log.update_iterations = arrays["update_iterations"].tolist()
     log.steps, log.last_status = saved["steps"], saved["last_status"]

@@ -39,8 +39,8 @@ class ArrivalDecision:
         solve, or, when there is none, from the map as it was before this update (its first
         `num_old_poses` poses and `num_old_edges` edges); None where not predicted."""
         state, kernel = self.state, self.settings.kernel
-        if not len(new_loops) or not self.settings.predicts_first_stage:
-            return None
+        if not len(new_loops) or not self.settings.predicts_first_stage or state.num_priors:
+            return None  # a map with priors is not predicted: `ConvergedMap` factorizes edges only
         if self.converged is None and not num_old_edges:  # no map to predict from yet
             return None
         if self.converged is None:
@@ -82,10 +82,10 @@ class ArrivalDecision:
     def factorize(self, trusted: np.ndarray, problem: Problem | None = None) -> ConvergedMap | None:
         """The map's information factorized at the current estimate over the `trusted` `(E',)`
         edges (its first `E'`), for the next updates' predictions; `problem`: the map's (default:
-        the current one). None when updates are not predicted."""
-        if not self.settings.predicts_first_stage:
-            return None
+        the current one). None when updates are not predicted (nor once the map holds priors)."""
         state = self.state
+        if not self.settings.predicts_first_stage or state.num_priors:
+            return None
         problem = problem or state.current_problem()
         num_edges = len(trusted)
         weights = KernelLoss(self.settings.kernel, state.mu[:num_edges], state.robust[:num_edges]).weight(

@@ -18,6 +18,7 @@ import numpy as np
 
 from egnc.graph.index_sets import sorted_unique
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE
+from egnc.nonlinear.prior_factors import PriorFactors
 from egnc.online.options import Settings
 from egnc.online.region import LocalProblem, Neighbourhoods, block_jacobi_decrease
 from egnc.online.stage import refresh_costs, solve_stage
@@ -56,8 +57,9 @@ class Graduation:
         self.neighbourhoods = Neighbourhoods()  # grown with the edges before each region is drawn
 
     def loops_to_graduate(self, new_loops: np.ndarray) -> np.ndarray:
-        """`(G,)` increasing edge indices: the loops this update graduates from `mu_init`
-        (`OnlineOptions.regraduate`); new loops strong at arrival start at `mu = 1` instead
+        """`(G,)` increasing factor indices: the candidates this update graduates from `mu_init`
+        (`OnlineOptions.regraduate`), given its new ones `new_loops` (loop closures, then priors,
+        `egnc.online.priors`); new candidates strong at arrival start at `mu = 1` instead
         (`OnlineOptions.strong_at_arrival`)."""
         state, online = self.state, self.settings.online_options
         graduating = new_loops
@@ -73,9 +75,10 @@ class Graduation:
 
     def trusted(self) -> np.ndarray:
         """`(E,)` bool: the edges whose IRLS weight is at least `trust_weight` (the kernel is
-        evaluated on the loop closures only; the other edges weigh 1)."""
+        evaluated on the loop closures only; the other edges weigh 1). The linear layer trusts
+        every prior (`egnc.nonlinear.prior_gauge.with_prior_products`)."""
         state, trust_weight = self.state, self.settings.options.trust_weight
-        loops = state.loops
+        loops = state.loops[: np.searchsorted(state.loops, len(state.edges))]  # the priors follow
         trusted = np.full(len(state.edges), 1.0 >= trust_weight)
         weights = self.settings.kernel.weight(state.r[loops], state.mu[loops])
         trusted[loops] = weights >= trust_weight
@@ -85,7 +88,8 @@ class Graduation:
         self, graduating: np.ndarray, new_loops: np.ndarray, seeds: np.ndarray | None, trusted: np.ndarray
     ) -> Graduated:
         """Run the stages of one update around `seeds` (pose rows; None: the whole map) with the
-        preconditioner of the `trusted` `(E,)` edges."""
+        preconditioner of the `trusted` `(E,)` edges; `new_loops`: the update's new candidates
+        (factor indices, `loops_to_graduate`)."""
         state, hops = self.state, self.settings.online_options.region_hops
         local = None
         neighbourhoods = self.neighbourhoods
@@ -185,13 +189,13 @@ class Graduation:
 
         `costs`: the region's per-edge costs `(E,)` (`_stages`), kept current."""
         state = self.state
-        edges = slice(None) if before.edges is None else before.edges
+        edges = slice(None) if before.factors is None else before.factors
         loss = KernelLoss(self.settings.kernel, state.mu[edges], state.robust[edges])
         if float(np.sum(loss.cost(before.r))) >= float(np.sum(loss.cost(state.r[edges]))):
             return False
         state.restore(before)
-        if costs is not None and before.edges is not None:
-            refresh_costs(state, self.settings.kernel, costs, before.edges)
+        if costs is not None and before.factors is not None:
+            refresh_costs(state, self.settings.kernel, costs, before.factors)
         return True
 
     def _next_mu(self, stage_index: int, active: np.ndarray, strong: np.ndarray) -> np.ndarray:
@@ -222,17 +226,19 @@ class Graduation:
         the last stage on."""
         far = self._far()
         crossed = far != was_far
-        new = slice(len(far) - len(new_loops), None)
+        new = np.isin(self.state.loops, new_loops)
         crossed[new] &= far[new]
         return bool(np.any(crossed))
 
     def _far(self) -> np.ndarray:
-        """`(L,)` bool per loop closure (`loops`): its residual is past the strong-outlier line (`high_quantile`)."""
+        """`(L,)` bool per candidate (`loops`): its residual is past the strong-outlier line (`high_quantile`)."""
         return self._past(self.settings.online_options.high_quantile, self.state.loops)
 
     def _past(self, quantile: float, edges: np.ndarray) -> np.ndarray:
-        """`(K,)` bool: which `edges` `(K,)` have a residual above the chi-square `quantile`."""
-        return exceeds(self.state.r[edges], quantile, self.settings.d, self.settings.gnc_options.threshold)
+        """`(K,)` bool: which factors `edges` `(K,)` have a residual above the chi-square
+        `quantile` (at each factor's own dimension)."""
+        state = self.state
+        return exceeds(state.r[edges], quantile, state.dims(edges), self.settings.gnc_options.threshold)
 
     def _local_problem(self, region: np.ndarray) -> LocalProblem | None:
         """The local problem of `region` (pose rows); None (the whole map) when it holds most of it."""
@@ -240,7 +246,12 @@ class Graduation:
         if len(region) > WHOLE_MAP_SHARE * len(state.vertex_ids):
             return None
         return LocalProblem.build(
-            region, self.neighbourhoods, state.factors(), state.gauge, self.settings.linear_solver
+            region,
+            self.neighbourhoods,
+            state.factors(),
+            state.held,
+            self.settings.linear_solver,
+            state.priors.factors(),
         )
 
     def _boundary_strained(self, local: LocalProblem, whole_cost: float) -> bool:
@@ -248,11 +259,22 @@ class Graduation:
         `OnlineOptions.boundary_share` of the update's tolerance (`egnc.online.region.block_jacobi_decrease`), that
         is of `rel_cost_tol` times `whole_cost`, the whole map's kernel cost."""
         state = self.state
-        boundary = local.boundary[local.boundary != state.gauge]
+        boundary = local.boundary[local.boundary != state.held]
         if not len(boundary):
             return False
         edges = self.neighbourhoods.edges_of(boundary)
         weights = KernelLoss(self.settings.kernel, state.mu[edges], state.robust[edges]).weight(state.r[edges])
-        decrease = block_jacobi_decrease(state.factors(), edges, state.T, weights, boundary)
+        decrease = block_jacobi_decrease(state.factors(), edges, state.T, weights, boundary, self._priors_on(boundary))
         tolerance = self.settings.stage_options()[0].rel_cost_tol * whole_cost
         return float(decrease.sum()) > self.settings.online_options.boundary_share * tolerance
+
+    def _priors_on(self, rows: np.ndarray) -> tuple[PriorFactors, np.ndarray] | None:
+        """The priors on the sorted pose `rows` and their `(Q,)` IRLS weights; None where there are none."""
+        state = self.state
+        factors = state.priors.factors()
+        if factors is None:
+            return None
+        on = np.flatnonzero(np.isin(factors.rows, rows))
+        indices = len(state.edges) + on
+        weights = KernelLoss(self.settings.kernel, state.mu[indices], state.robust[indices]).weight(state.r[indices])
+        return factors.subset(on), weights

@@ -21,6 +21,7 @@ from egnc.errors import GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE
 from egnc.graph.checks import check_vertex_ids, describe
 from egnc.graph.health import UnrepresentableError, coarse_edges
+from egnc.graph.priors import POSE
 from egnc.graph.validity import first_bad_quaternion
 
 __all__ = ["Estimate", "Intake", "Pending", "id_pair", "one_row", "vertex_id"]
@@ -49,9 +50,14 @@ class Pending:
     information: list[np.ndarray] = field(default_factory=list)
     robust: list[bool] = field(default_factory=list)
     prior: tuple[int, np.ndarray] | None = None
+    prior_ids: list[int] = field(default_factory=list)  # measurement priors (egnc.online.priors)
+    prior_kinds: list[int] = field(default_factory=list)
+    prior_measurements: list[np.ndarray] = field(default_factory=list)
+    prior_information: list[np.ndarray] = field(default_factory=list)
+    prior_known: list[bool] = field(default_factory=list)
 
     def __bool__(self) -> bool:
-        return bool(self.pose_ids or self.edge_ids or self.prior is not None)
+        return bool(self.pose_ids or self.edge_ids or self.prior is not None or self.prior_ids)
 
 
 class Intake:
@@ -111,6 +117,35 @@ class Intake:
             self.add_poses([vertex], one_row(value))
         self.pending.prior = (vertex, value)
 
+    def add_measurement_priors(
+        self, kind: int, ids: ArrayLike, values: ArrayLike, information: ArrayLike, known: bool, first: int
+    ) -> np.ndarray:
+        """Priors of `kind` (`POSE` or `POSITION`, `egnc.graph.priors`) on poses `ids` `(K,)`:
+        `values` `(K, P)` poses or `(K, dim)` positions, `information` `(K, m, m)`, known inliers if
+        `known`; returns their prior indices `(K,)`, from `first` (the priors before them)."""
+        vertices = _ids(ids, 1)
+        k, dim, d = len(vertices), self.dim, TANGENT_SIZE[self.dim]
+        m = d if kind == POSE else dim
+        name = "prior poses" if kind == POSE else "prior positions"
+        array = self._poses_array(values, k, name) if kind == POSE else _array(values, (k, dim), name)
+        info = _array(information, (k, m, m), "prior information")
+        _check_information(info)
+        unknown = [vertex for vertex in vertices.tolist() if vertex not in self.known_ids]
+        if unknown:
+            raise GraphError(f"prior on pose {unknown[0]}: the pose is not known; add it or its odometry first")
+        padded_values = np.zeros((k, POSE_SIZE[dim]))
+        padded_values[:, : array.shape[1]] = array
+        padded_info = np.zeros((k, d, d))
+        padded_info[:, :m, :m] = info
+        first += len(self.pending.prior_ids)
+        for vertex, value, matrix in zip(vertices.tolist(), padded_values, padded_info):
+            self.pending.prior_ids.append(vertex)
+            self.pending.prior_kinds.append(kind)
+            self.pending.prior_measurements.append(value)
+            self.pending.prior_information.append(matrix)
+            self.pending.prior_known.append(known)
+        return np.arange(first, first + k)
+
     def add_edges(
         self, ids: ArrayLike, measurements: ArrayLike, information: ArrayLike, robust: bool, estimate: Estimate
     ) -> np.ndarray:
@@ -121,10 +156,7 @@ class Intake:
         d = TANGENT_SIZE[self.dim]
         values = self._poses_array(measurements, k, "measurements")
         info = _array(information, (k, d, d), "information")
-        if not np.allclose(info, info.swapaxes(1, 2), rtol=1e-9, atol=0.0):
-            raise GraphError("information matrices must be symmetric")
-        if k and np.any(np.linalg.eigvalsh(0.5 * (info + info.swapaxes(1, 2)))[:, 0] <= 0.0):
-            raise GraphError("information matrices must be positive definite")
+        _check_information(info)
         self._check_ends(pairs, robust)
         first = len(estimate.edges) + len(self.pending.edge_ids)
         self._check_representable(pairs, values, info, robust, estimate, first)
@@ -201,6 +233,14 @@ class Intake:
             where = f" row {found[0]}" if count > 1 else ""
             raise GraphError(f"{name}{where}: {found[1]}")
         return array
+
+
+def _check_information(info: np.ndarray) -> None:
+    """Refuse information matrices `(K, m, m)` that are not symmetric positive definite."""
+    if not np.allclose(info, info.swapaxes(1, 2), rtol=1e-9, atol=0.0):
+        raise GraphError("information matrices must be symmetric")
+    if len(info) and np.any(np.linalg.eigvalsh(0.5 * (info + info.swapaxes(1, 2)))[:, 0] <= 0.0):
+        raise GraphError("information matrices must be positive definite")
 
 
 def vertex_id(value: object) -> int:

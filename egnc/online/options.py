@@ -7,6 +7,7 @@ imply; every part of the solver reads them from there.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -15,7 +16,7 @@ from egnc.graph import TANGENT_SIZE, is_dim
 from egnc.graph.checks import check_bool, check_choice, check_float, check_instance, check_int, describe
 from egnc.linalg.linear_solvers import resolve_name
 from egnc.nonlinear.least_squares import SolverOptions
-from egnc.robust.gnc import GncOptions
+from egnc.robust.gnc import GncOptions, known_inlier_kinds
 from egnc.robust.kernels import Kernel, make_kernel
 
 __all__ = ["ONLINE_METHODS", "OnlineOptions", "Settings"]
@@ -118,6 +119,8 @@ class Settings:
         method: a schedule of `ONLINE_METHODS`.
         linear_solver: the resolved backend name (`egnc.linalg.linear_solvers`).
         options, gnc_options, online_options: as given to `egnc.online.OnlineSolver`, defaults filled in.
+        priors_known: whether measurement priors are known inliers by default (`OnlineSolver`'s
+            `known_inliers` names `"priors"`); else they are candidates, as in `egnc.solve`.
         d: tangent size of a pose (3 or 6).
         kernel: the SIG kernel of shape `gnc_options.c` every loop closure is weighed with.
     """
@@ -128,6 +131,7 @@ class Settings:
     options: SolverOptions
     gnc_options: GncOptions
     online_options: OnlineOptions
+    priors_known: bool = False
     d: int = field(init=False)
     kernel: Kernel = field(init=False, repr=False)
 
@@ -144,6 +148,7 @@ class Settings:
         options: SolverOptions | None,
         gnc_options: GncOptions | None,
         online_options: OnlineOptions | None,
+        known_inliers: str | Sequence[str] = "odometry",
     ) -> Settings:
         """Check `egnc.online.OnlineSolver`'s arguments (its Raises) and fill in the default options."""
         if not is_dim(dim):
@@ -167,7 +172,13 @@ class Settings:
             options or SolverOptions(),
             gnc_options or GncOptions(),
             online_options or OnlineOptions(),
+            _priors_known(known_inliers),
         )
+
+    @property
+    def known_inliers(self) -> str:
+        """The kinds held quadratic, as `OnlineSolver`'s `known_inliers` names them."""
+        return "odometry,priors" if self.priors_known else "odometry"
 
     @property
     def predicts_first_stage(self) -> bool:
@@ -180,3 +191,22 @@ class Settings:
         if self.online_options.stage_iterations is None:
             return tight, tight
         return tight, replace(tight, max_iterations=self.online_options.stage_iterations)
+
+
+def _priors_known(known_inliers: object) -> bool:
+    """Whether `known_inliers` (kinds, `egnc.robust.gnc.KNOWN_INLIER_KINDS`) names the priors.
+
+    Raises:
+        OptionError: not kinds (a mask has no meaning before the factors arrive), an unknown
+            kind, or `"loops"` (an online solver's edges take their role from the call adding them).
+    """
+    if not isinstance(known_inliers, str) and not (
+        isinstance(known_inliers, (tuple, list)) and all(isinstance(kind, str) for kind in known_inliers)
+    ):
+        raise OptionError(
+            f"known_inliers of an online solver must name kinds (e.g. 'odometry,priors'), got {describe(known_inliers)}"
+        )
+    kinds = known_inlier_kinds(known_inliers)
+    if "loops" in kinds:
+        raise OptionError("an online solver's loop closures are candidates: add known-inlier edges with add_odometry")
+    return "priors" in kinds

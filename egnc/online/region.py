@@ -22,7 +22,7 @@ the caller compares it with a small share of its tolerance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from egnc.graph.index_sets import sorted_unique
 from egnc.linalg.normal_equations import edge_products
 from egnc.nonlinear.factors import BetweenFactors
 from egnc.nonlinear.least_squares import Problem
+from egnc.nonlinear.prior_factors import PriorFactors
 
 __all__ = ["LocalProblem", "Neighbourhoods", "block_jacobi_decrease"]
 
@@ -126,18 +127,22 @@ class Neighbourhoods:
 
 @dataclass(frozen=True, eq=False)
 class LocalProblem:
-    """A region's poses free, their other neighbours fixed, and every edge with a free end.
+    """A region's poses free, their other neighbours fixed, every edge with a free end, and
+    every prior on a free pose (an edge from a fixed pose: it anchors its pose).
 
     Attributes:
         rows: `(M,)` sorted pose rows of the whole graph in the local problem (free and boundary).
         free: `(M,)` bool, which of `rows` the solve moves.
         edges: `(K,)` sorted indices of the whole graph's edges in it.
-        problem: the `egnc.nonlinear.least_squares.Problem` over them, local rows and edges.
+        factors: `(K + Q,)` its factor indices in the whole graph's per-factor arrays: `edges`,
+            then the `Q` priors' (`E + k`, `egnc.online.priors`); `edges` itself without priors.
+        problem: the `egnc.nonlinear.least_squares.Problem` over them, local rows and factors.
     """
 
     rows: np.ndarray
     free: np.ndarray
     edges: np.ndarray
+    factors: np.ndarray
     problem: Problem
 
     @classmethod
@@ -148,6 +153,7 @@ class LocalProblem:
         factors: BetweenFactors,
         held: int,
         linear_solver: str,
+        priors: PriorFactors | None = None,
     ) -> LocalProblem:
         """The local problem of the free poses `region` (sorted rows).
 
@@ -157,6 +163,8 @@ class LocalProblem:
             factors: the whole graph's factors.
             held: a row held fixed even inside the region (the gauge), or -1.
             linear_solver: backend name (`egnc.linalg.linear_solvers`).
+            priors: the whole graph's priors, None without; the loss then covers the local
+                problem's factors, edges then priors (`Problem.weighted_priors`).
         """
         edges = neighbourhoods.edges_of(region)
         rows = sorted_unique(factors.edges[edges].ravel())
@@ -164,8 +172,15 @@ class LocalProblem:
         in_region = region[np.minimum(np.searchsorted(region, rows), len(region) - 1)] == rows
         free = in_region & (rows != held)
         local_factors = BetweenFactors(factors.dim, local_edges, factors.Z_inv[edges], factors.information[edges])
-        # A region is small: its direct solver orders it itself, cheaper than a block order.
-        return cls(rows, free, edges, Problem.from_factors(local_factors, ~free, linear_solver, fill_reducing=False))
+        local_priors = np.zeros(0, dtype=np.int64) if priors is None else _on_free_poses(priors.rows, rows[free])
+        if priors is None or not len(local_priors):
+            # A region is small: its direct solver orders it itself, cheaper than a block order.
+            return cls(rows, free, edges, edges, Problem.from_factors(local_factors, ~free, linear_solver, False))
+        position = np.searchsorted(rows, priors.rows[local_priors])
+        anchored = priors.subset(local_priors, position)
+        problem = Problem.from_factors(local_factors, ~free, linear_solver, False, anchored)
+        indices = np.concatenate((edges, len(factors.edges) + local_priors))
+        return cls(rows, free, edges, indices, replace(problem, weighted_priors=True))
 
     @property
     def boundary(self) -> np.ndarray:
@@ -173,8 +188,22 @@ class LocalProblem:
         return self.rows[~self.free]
 
 
+def _on_free_poses(prior_rows: np.ndarray, free_rows: np.ndarray) -> np.ndarray:
+    """Increasing indices of the priors on pose rows `prior_rows` `(K,)` that measure one of the
+    sorted `free_rows`."""
+    if not len(free_rows):
+        return np.zeros(0, dtype=np.int64)
+    position = np.minimum(np.searchsorted(free_rows, prior_rows), len(free_rows) - 1)
+    return np.flatnonzero(free_rows[position] == prior_rows)
+
+
 def block_jacobi_decrease(
-    factors: BetweenFactors, edges: np.ndarray, T: np.ndarray, weights: np.ndarray, rows: np.ndarray
+    factors: BetweenFactors,
+    edges: np.ndarray,
+    T: np.ndarray,
+    weights: np.ndarray,
+    rows: np.ndarray,
+    priors: tuple[PriorFactors, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Per pose of `rows`, the cost decrease its own Newton step would bring, all else held.
 
@@ -184,6 +213,8 @@ def block_jacobi_decrease(
         T: `(N, n, n)` the whole graph's pose matrices.
         weights: `(K,)` IRLS weights of `edges`.
         rows: `(B,)` sorted pose rows.
+        priors: the priors on poses of `rows` and their `(Q,)` IRLS weights, or None: each an
+            edge from a fixed virtual pose (row N, `egnc.nonlinear.prior_gauge`).
 
     Returns:
         `(B,)` `0.5 g_b^T H_bb^-1 g_b`, from the gradient `g_b` and diagonal block `H_bb` of
@@ -192,12 +223,19 @@ def block_jacobi_decrease(
     subset = factors.subset(edges)
     d = subset.information.shape[-1]
     products = edge_products(subset.linearize(T), subset.information, weights)
+    ends = subset.edges
+    if priors is not None:
+        prior_factors, prior_weights = priors
+        prior_products = edge_products(prior_factors.linearize(T), prior_factors.information, prior_weights)
+        products = np.concatenate((products, prior_products))
+        anchor = np.full(len(prior_factors), len(T), dtype=np.int64)
+        ends = np.concatenate((ends, np.stack((anchor, prior_factors.rows), axis=1)))
     gradient = np.zeros((len(rows) + 1, d))
     block = np.zeros((len(rows) + 1, d, d))
     for end in (0, 1):
-        position = np.searchsorted(rows, subset.edges[:, end])
+        position = np.searchsorted(rows, ends[:, end])
         inside = position < len(rows)
-        inside[inside] = rows[position[inside]] == subset.edges[inside, end]
+        inside[inside] = rows[position[inside]] == ends[inside, end]
         slot = np.where(inside, position, len(rows))  # the last slot collects the other ends
         span = slice(end * d, (end + 1) * d)
         np.add.at(gradient, slot, products[:, span, 2 * d])

@@ -16,8 +16,15 @@ pose: the edges before it wait until the replay has met their poses). A graph wh
 reach their poses in order replays exactly as described above; steps left with nothing to add
 are no updates.
 
-The `Result` of a replay lists the edges in the graph's own (file) order, so its edge indices,
-`rejected_edges` included, are those of `egnc.solve` on the same graph.
+A graph's priors (pose and position priors, `egnc.graph.priors`) are replayed at the step their
+pose arrives (the gauge pose's with the first step), after the step's edges, in file order:
+candidates or known inliers as `known_inliers` says, as in `egnc.solve`. A graph with priors and
+no fixed pose starts from its first pose unheld by a prior: the online solver holds it until the
+priors pin the map, then moves the map onto them (`egnc.online.priors`), as the batch solve puts
+such a graph in the priors' frame. A graph without priors replays as it always did.
+
+The `Result` of a replay lists the edges and the priors in the graph's own (file) order, so its
+indices, `rejected_edges` and `rejected_priors` included, are those of `egnc.solve` on the same graph.
 
 Checkpoints: with `checkpoint`, the solver's whole state is written there (atomically) every
 `checkpoint_every` steps and after the last one, together with a fingerprint of the graph. A
@@ -42,19 +49,22 @@ from egnc.api import Result
 from egnc.errors import EgncError, GraphError
 from egnc.graph import PoseGraph
 from egnc.graph.checks import check_callable, check_instance, check_int
+from egnc.graph.priors import KIND_NAMES
 from egnc.io.atomic import check_writable
 from egnc.nonlinear.least_squares import SolverOptions
 from egnc.online import OnlineOptions, OnlineSolver, UpdateReport
 from egnc.online.solver import UpdateCallback
-from egnc.robust.gnc import GncOptions, known_inlier_mask
+from egnc.robust.gnc import GncOptions, KnownInliers, known_inlier_mask
 
 __all__ = [
     "CHECKPOINT_EVERY",
     "ReplayOutcome",
     "ReplayStep",
     "add_gauge",
+    "add_priors",
     "add_step",
     "latency_summary",
+    "prior_steps",
     "replay",
     "replay_plan",
     "replay_steps",
@@ -188,15 +198,42 @@ def _connect(
     return ReplayStep(np.array(taken, dtype=np.int64), np.array(loop_placed, dtype=np.int64)), waiting
 
 
+def prior_steps(graph: PoseGraph, steps: list[ReplayStep]) -> np.ndarray:
+    """`(K,)` the step at which each prior of `graph` is replayed: the first whose edges reach its
+    pose (0 for the gauge pose's)."""
+    arrival = np.full(graph.num_poses, len(steps), dtype=np.int64)
+    for number in range(len(steps) - 1, -1, -1):  # the earliest step wins
+        arrival[graph.edges[steps[number].edges].ravel()] = number
+    arrival[gauge_row(graph)] = 0
+    return arrival[graph.priors.rows]
+
+
+def add_priors(solver: OnlineSolver, graph: PoseGraph, priors: np.ndarray, known: np.ndarray) -> None:
+    """Add the `priors` (increasing indices) of `graph` to `solver` in their order, known inliers
+    where `known` `(K,)` says so."""
+    dim, d = graph.dim, graph.tangent_dim
+    for k in priors.tolist():
+        kind = KIND_NAMES[graph.priors.kinds[k]]
+        m = d if kind == "pose" else dim
+        value = graph.priors.measurements[k] if kind == "pose" else graph.priors.measurements[k, :dim]
+        information = graph.priors.information[k, :m, :m]
+        vertex = graph.vertex_ids[graph.priors.rows[k]]
+        solver.add_priors(kind, [vertex], [value], [information], bool(known[k]))
+
+
 def gauge_row(graph: PoseGraph) -> int:
     """The row of `graph`'s gauge pose: the fixed one, else row 0."""
     return int(np.flatnonzero(graph.fixed)[0]) if graph.fixed.any() else 0
 
 
 def add_gauge(solver: OnlineSolver, graph: PoseGraph) -> None:
-    """Give `solver` the prior of `graph`'s gauge pose (the fixed one, else row 0), as `replay` does."""
+    """Give `solver` the prior of `graph`'s gauge pose (the fixed one, else row 0), as `replay`
+    does; for a graph with priors and no fixed pose, that pose unheld by a prior (module docstring)."""
     gauge = gauge_row(graph)
-    solver.add_prior(int(graph.vertex_ids[gauge]), graph.poses[gauge])
+    if graph.num_priors and not graph.fixed.any():
+        solver.add_pose(int(graph.vertex_ids[gauge]), graph.poses[gauge])
+    else:
+        solver.add_prior(int(graph.vertex_ids[gauge]), graph.poses[gauge])
 
 
 def add_step(solver: OnlineSolver, graph: PoseGraph, step: ReplayStep, known_inliers: np.ndarray) -> None:
@@ -212,9 +249,14 @@ def add_step(solver: OnlineSolver, graph: PoseGraph, step: ReplayStep, known_inl
 
 
 def fingerprint(graph: PoseGraph, known_inliers: np.ndarray) -> str:
-    """A SHA-256 of what a replay depends on: the edges, their measurements and information, the roles."""
+    """A SHA-256 of what a replay depends on: the edges, their measurements and information, the
+    roles (`(E,)`, or `(E + K,)` edges then priors), and the priors where the graph has any."""
     digest = hashlib.sha256()
-    for array in (graph.vertex_ids, graph.edges, graph.measurements, graph.information, known_inliers, graph.fixed):
+    arrays = [graph.vertex_ids, graph.edges, graph.measurements, graph.information, known_inliers, graph.fixed]
+    if graph.num_priors:  # a graph without priors keeps the fingerprint it always had
+        priors = graph.priors
+        arrays += [priors.rows, priors.kinds, priors.measurements, priors.information]
+    for array in arrays:
         digest.update(np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()
 
@@ -223,7 +265,7 @@ def replay(
     graph: PoseGraph,
     method: str = "egnc",
     *,
-    known_inliers: np.ndarray | None = None,
+    known_inliers: KnownInliers | None = None,
     linear_solver: str = "auto",
     options: SolverOptions | None = None,
     gnc_options: GncOptions | None = None,
@@ -239,7 +281,10 @@ def replay(
     Args:
         graph: the pose graph; its gauge pose (the fixed one, else row 0) is the prior.
         method: `"egnc"` or `"risam"`.
-        known_inliers: `(E,)` bool, edges added as odometry (default: `graph.is_odometry`).
+        known_inliers: the factors held quadratic, as for `egnc.solve`: kinds (default
+            `"odometry"`: the edges between consecutive ids are added as odometry, the others as
+            loop closures, and the priors are candidates) or a bool mask, `(E,)` over the edges or
+            `(E + K,)` over the edges then the priors.
         linear_solver, options, gnc_options, online_options: as for `OnlineSolver`.
         checkpoint: a file to write the state to, and to resume from when it exists.
         checkpoint_every: steps between two checkpoint writes (and one after the last step).
@@ -258,14 +303,14 @@ def replay(
         GraphError: edges no edge connects to the gauge pose (`replay_plan`).
     """
     check_instance("graph", graph, PoseGraph)
-    # The replay adds edges; the edges' part of the mask (a graph's priors are not replayed as candidates).
-    known = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)[: graph.num_edges]
+    known, priors_known = _roles(graph, known_inliers)
     _check_arguments(graph, checkpoint, checkpoint_every, stop_after, on_step)
     check_callable("on_update", on_update)
     steps = replay_plan(graph, known)
-    settings = _checkpoint_meta(graph, known, method, online_options or OnlineOptions())
+    arrivals = prior_steps(graph, steps)
+    settings = _checkpoint_meta(graph, np.concatenate((known, priors_known)), method, online_options or OnlineOptions())
     path = None if checkpoint is None else Path(checkpoint)
-    solver = _resumed(path, settings, graph, known, steps)
+    solver = _resumed(path, settings, graph, known, steps, arrivals)
     if solver is None:
         solver = OnlineSolver(
             graph.dim,
@@ -278,18 +323,17 @@ def replay(
         add_gauge(solver, graph)
     solver.on_update = on_update
     done = resumed_from = solver.steps  # one update per step
-    order = np.concatenate([step.edges for step in steps]) if steps else np.zeros(0, dtype=np.int64)
     last = len(steps) if stop_after is None else min(len(steps), stop_after)
     for step in range(done, last):
         add_step(solver, graph, steps[step], known)
+        add_priors(solver, graph, np.flatnonzero(arrivals == step), priors_known)
         report = solver.update()
         done = step + 1
         if on_step is not None:
             on_step(done, len(steps), report)
         if path is not None and (done % checkpoint_every == 0 or done == last):
             solver.save(path, meta=settings)
-    inserted = order[: solver.num_edges]
-    result = _in_file_order(solver.result(), inserted, graph) if done == len(steps) else solver.result()
+    result = _in_file_order(solver.result(), steps, arrivals, graph) if done == len(steps) else solver.result()
     update_ms = solver.update_ms
     return ReplayOutcome(
         result=result,
@@ -300,6 +344,13 @@ def replay(
         update_iterations=solver.update_iterations,
         total_s=1e-3 * float(update_ms.sum()),
     )
+
+
+def _roles(graph: PoseGraph, known_inliers: KnownInliers | None) -> tuple[np.ndarray, np.ndarray]:
+    """`(E,)` the known-inlier edges and `(K,)` the known-inlier priors of `replay`'s `known_inliers`."""
+    mask = known_inlier_mask(graph, "odometry" if known_inliers is None else known_inliers)
+    priors = mask[graph.num_edges :] if len(mask) > graph.num_edges else np.ones(graph.num_priors, dtype=bool)
+    return mask[: graph.num_edges], priors
 
 
 def _check_arguments(
@@ -335,7 +386,12 @@ def _checkpoint_meta(graph: PoseGraph, known: np.ndarray, method: str, online_op
 
 
 def _resumed(
-    path: Path | None, settings: dict, graph: PoseGraph, known: np.ndarray, steps: list[ReplayStep]
+    path: Path | None,
+    settings: dict,
+    graph: PoseGraph,
+    known: np.ndarray,
+    steps: list[ReplayStep],
+    arrivals: np.ndarray,
 ) -> OnlineSolver | None:
     """The solver of the checkpoint at `path` when it exists, refused unless it was written with
     `settings` (`replay`'s checkpoint meta) and holds the first steps of the replay of `graph`
@@ -355,6 +411,10 @@ def _resumed(
         what = ", ".join(differs) if same_graph else "another graph or edge roles"
         raise EgncError(f"{path}: the checkpoint was written for {what}; resume with its settings or remove it")
     _check_prefix(path, solver, graph, known, steps)
+    inserted = np.flatnonzero(arrivals < solver.steps)  # in file order; replayed in step order
+    expected = graph.vertex_ids[graph.priors.rows[inserted[np.argsort(arrivals[inserted], kind="stable")]]]
+    if not np.array_equal(solver.prior_ids, expected):
+        raise EgncError(f"{path}: the checkpoint's priors are not this input's after {solver.steps} steps; remove it")
     return solver
 
 
@@ -387,10 +447,15 @@ def _check_prefix(
         raise EgncError(f"{refuse}: its edge ({i}, {j}){where} differs (edited?); remove it")
 
 
-def _in_file_order(result: Result, inserted: np.ndarray, graph: PoseGraph) -> Result:
-    """`result` (edges in insertion order; `inserted[k]` is the file index of edge k) with edges in file order."""
+def _in_file_order(result: Result, steps: list[ReplayStep], arrivals: np.ndarray, graph: PoseGraph) -> Result:
+    """`result` of the whole replay of `graph` in `steps` (edges and priors in insertion order;
+    `arrivals`: `(K,)` each prior's step) with edges and priors in file order."""
+    inserted = np.concatenate([step.edges for step in steps]) if steps else np.zeros(0, dtype=np.int64)
+    prior_order = np.argsort(arrivals, kind="stable")  # prior k was inserted as prior position[k]
     position = np.empty_like(inserted)
     position[inserted] = np.arange(len(inserted))  # file edge f was inserted as edge position[f]
+    prior_position = np.empty_like(prior_order)
+    prior_position[prior_order] = np.arange(len(prior_order))
     solved = result.graph
     if not np.array_equal(solved.vertex_ids, graph.vertex_ids):
         raise EgncError("the replay did not take in every pose of the graph")
@@ -403,7 +468,12 @@ def _in_file_order(result: Result, inserted: np.ndarray, graph: PoseGraph) -> Re
         name: getattr(result, name)[position]
         for name in ("residual_norms", "weights", "mu", "known_inliers", "inliers", "robust_residual_norms")
     }
-    return replace(result, graph=reordered, **per_edge)
+    per_prior = {
+        name: getattr(result, name)[prior_position]
+        for name in ("prior_residual_norms", "prior_inliers", "prior_candidates")
+        if getattr(result, name) is not None
+    }
+    return replace(result, graph=reordered, **per_edge, **per_prior)
 
 
 def latency_summary(update_ms: np.ndarray) -> dict[str, float]:

@@ -20,14 +20,16 @@ class UpdateReport:
         new_poses: poses added by the update.
         new_edges: `(K,)` indices of the edges it added (odometry and loops, in insertion order).
         new_loops: `(L,)` indices of the loop closures it added.
+        new_priors: `(Q,)` prior indices of the measurement priors it added (`add_pose_prior`, ...).
         decided_at_arrival: whether the update solved nothing because its stages, predicted from
             the map factorized after the last solve, would end where it started with its new loops
             off (`OnlineOptions.decide_at_arrival`); its new loops are then at `mu = 1`.
-        graduated: loop closures graduated by the update (the new ones and, with
-            `regraduate="reference"`, older ones whose `mu_init` is 0).
+        graduated: candidates graduated by the update (the new loop closures and candidate priors
+            and, with `regraduate="reference"`, older ones whose `mu_init` is 0).
         stages: one report per solve (empty when nothing needed solving or `decided_at_arrival`).
-        mu_history: `(S, L)` `mu` of each new loop closure in each stage.
-        residual_history: `(S, L)` whitened residual norm `r` of each new loop closure after
+        mu_history: `(S, L')` `mu` of each new candidate in each stage: the new loop closures,
+            then the new candidate priors.
+        residual_history: `(S, L')` whitened residual norm `r` of each new candidate after
             each stage (what the next stage's `mu` was chosen from).
         iterations: accepted solver steps over the stages.
         time_s: wall time of the update in seconds.
@@ -46,6 +48,7 @@ class UpdateReport:
     new_poses: int
     new_edges: np.ndarray
     new_loops: np.ndarray
+    new_priors: np.ndarray
     decided_at_arrival: bool
     graduated: int
     stages: tuple[StageReport, ...]

@@ -16,14 +16,17 @@ import numpy as np
 from egnc.api import Result, decided_fields, solve
 from egnc.errors import GraphError
 from egnc.graph import PoseGraph
-from egnc.nonlinear.factors import BetweenFactors, from_matrices, to_matrices
+from egnc.nonlinear.factors import from_matrices, to_matrices
 from egnc.nonlinear.least_squares import STATUS_MESSAGES
+from egnc.nonlinear.prior_factors import prior_cost
 from egnc.online.options import Settings
 from egnc.online.report import UpdateLog
 from egnc.online.state import MapState
 from egnc.robust.decision import decide_outliers, lower_by_more_than_rounding
+from egnc.robust.factor_set import Factors, FactorSet, factor_dims
 from egnc.robust.gnc import StageReport, classify_inliers
 from egnc.robust.losses import KernelLoss
+from egnc.robust.result import PriorDecision
 
 __all__ = ["online_result"]
 
@@ -44,16 +47,22 @@ class _Decided:
 
 def online_result(settings: Settings, state: MapState, log: UpdateLog, decide: bool) -> Result:
     """`state` as a `Result`, poses sorted by vertex id (`OnlineSolver.result`, which checks its
-    arguments); `decide`: make the batch decision, else report the current robust estimate."""
+    arguments); `decide`: make the batch decision, else report the current robust estimate.
+
+    Candidate priors join the edges in the decision's per-factor arrays (`egnc.robust.factor_set`),
+    as in `egnc.solve`, and the result reports them apart (`Result.rejected_priors`)."""
     started = time.perf_counter()
     graph = state.graph()
-    factors = state.factors()
-    robust = state.robust.copy()
+    E = len(state.edges)
+    # Priors that may be rejected join the edges in every per-factor array; known ones stay quadratic.
+    factors: Factors = FactorSet.from_graph(graph, state.factors()) if state.robust[E:].any() else state.factors()
+    F = len(state.r) if isinstance(factors, FactorSet) else E
+    robust = state.robust[:F].copy()
     online_stage = _online_stage(settings, state, log)
     stages: tuple[StageReport, ...] = (online_stage,)
     poses = state.T
-    robust_r = state.r.copy()
-    weights = KernelLoss(settings.kernel, state.mu, robust).weight(robust_r)
+    robust_r = state.r[:E].copy()
+    weights = KernelLoss(settings.kernel, state.mu, state.robust).weight(state.r)[:E]
     status = online_stage.status
     settled, start, note = True, "online", ""
     disputed: np.ndarray | None = None
@@ -62,11 +71,13 @@ def online_result(settings: Settings, state: MapState, log: UpdateLog, decide: b
     if decided:
         kept = _decision(settings, graph, factors, poses, robust, sorted_graph, new_row, online_stage.status)
         poses, inliers, settled, start, status = kept.poses, kept.inliers, kept.settled, kept.start, kept.status
-        stages, disputed, note = stages + kept.stages, kept.disputed, kept.note
+        stages, disputed, note = stages + kept.stages, kept.disputed[:E], kept.note
     r = factors.whitened_norms(factors.residuals(poses))
     if not decided:
-        inliers = classify_inliers(r, robust, settings.d, settings.gnc_options)
-    initial_r = factors.whitened_norms(factors.residuals(state.T_initial))
+        inliers = classify_inliers(r, robust, factor_dims(graph, factors), settings.gnc_options)
+    initial_r = factors.whitened_norms(factors.residuals(state.T_initial))[:E]
+    priors = PriorDecision.of(factors, r, inliers, robust, settings.gnc_options.outlier_quantile)
+    r, inliers, robust = r[:E], inliers[:E], robust[:E]
     result_poses = from_matrices(settings.dim, poses)[order]
     fields = decided_fields(
         sorted_graph,
@@ -80,6 +91,7 @@ def online_result(settings: Settings, state: MapState, log: UpdateLog, decide: b
         start=start,
         settled=settled,
         disputed=disputed,
+        priors=priors,
     )
     return Result(
         graph=sorted_graph.with_poses(result_poses),
@@ -87,7 +99,7 @@ def online_result(settings: Settings, state: MapState, log: UpdateLog, decide: b
         linear_solver=settings.linear_solver,
         residual_norms=r,
         weights=weights,
-        mu=np.where(state.robust, state.mu, np.nan),
+        mu=np.where(state.robust, state.mu, np.nan)[:E],
         known_inliers=~robust,
         inliers=inliers,
         stages=stages,
@@ -98,6 +110,7 @@ def online_result(settings: Settings, state: MapState, log: UpdateLog, decide: b
         robust_residual_norms=robust_r,
         init="online",
         **fields,
+        **({} if priors is None else priors.result_fields()),
     )
 
 
@@ -125,7 +138,8 @@ def _sorted_graph(state: MapState) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     new_row = np.empty_like(order)
     new_row[order] = np.arange(len(order))
     fixed = np.zeros(len(order), dtype=bool)
-    fixed[new_row[state.gauge]] = new_row[state.gauge] != 0
+    # With priors the held pose is named even at row 0 (a graph with priors holds none by itself).
+    fixed[new_row[state.gauge]] = state.held >= 0 and (new_row[state.gauge] != 0 or state.num_priors > 0)
     graph = PoseGraph(
         dim=state.dim,
         vertex_ids=state.vertex_ids[order],
@@ -134,6 +148,7 @@ def _sorted_graph(state: MapState) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
         measurements=state.measurements,
         information=state.information,
         fixed=fixed,
+        priors=state.priors.priors(new_row[state.priors.rows]),
     )
     return graph, order, new_row
 
@@ -141,7 +156,7 @@ def _sorted_graph(state: MapState) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
 def _decision(
     settings: Settings,
     graph: PoseGraph,
-    factors: BetweenFactors,
+    factors: Factors,
     poses: np.ndarray,
     robust: np.ndarray,
     sorted_graph: PoseGraph,
@@ -150,35 +165,45 @@ def _decision(
 ) -> _Decided:
     """The decision from the online estimate `poses` of `graph` (row order), or the batch
     solve's of `sorted_graph` where its truncated cost is lower by more than rounding.
-    `status`: the online stage's, kept when the decision solves nothing."""
+    `robust`: `(F,)` the candidates among `factors`; `status`: the online stage's, kept when
+    the decision solves nothing."""
     decision = decide_outliers(
         graph, poses, robust, settings.options, settings.gnc_options, settings.linear_solver, factors, start="online"
     )
     if decision.reports:
         status = decision.reports[-1].status
-    batch = _batch_solve(settings, sorted_graph, robust)
+    known = np.ones(graph.num_edges + graph.num_priors, dtype=bool)  # priors not among `factors` are known
+    known[: len(robust)] = ~robust
+    batch = _batch_solve(settings, sorted_graph, known if graph.num_priors else ~robust)
+    batch_inliers = (
+        batch.inliers if batch.prior_inliers is None else np.concatenate((batch.inliers, batch.prior_inliers))
+    )
     stages = decision.reports + batch.stages
-    if not lower_by_more_than_rounding(batch.truncated_cost, decision.truncated_cost):
-        disputed = robust & ~decision.inliers & batch.inliers
+    online_cost = decision.truncated_cost
+    if graph.num_priors and not isinstance(factors, FactorSet):  # the batch's cost counts the known priors
+        online_cost += prior_cost(graph.priors, from_matrices(settings.dim, decision.poses))
+    if not lower_by_more_than_rounding(batch.truncated_cost, online_cost):
+        disputed = robust & ~decision.inliers & batch_inliers
         return _Decided(decision.poses, decision.inliers, decision.settled, "online", status, stages, disputed, "")
     note = (
         f"; decision from the batch solve of the whole graph (truncated cost {batch.truncated_cost:.6g},"
-        f" against {decision.truncated_cost:.6g} from the online estimate)"
+        f" against {online_cost:.6g} from the online estimate)"
     )
-    disputed = robust & ~batch.inliers & decision.inliers
+    disputed = robust & ~batch_inliers & decision.inliers
     poses = to_matrices(settings.dim, batch.graph.poses)[new_row]
-    return _Decided(poses, batch.inliers, batch.settled, batch.start, batch.status, stages, disputed, note)
+    return _Decided(poses, batch_inliers, batch.settled, batch.start, batch.status, stages, disputed, note)
 
 
-def _batch_solve(settings: Settings, graph: PoseGraph, robust: np.ndarray) -> Result:
-    """`egnc.solve` of `graph` (vertex-sorted) from its odometry composed from the gauge, or
-    from the poses as placed at arrival where odometry does not reach every pose."""
+def _batch_solve(settings: Settings, graph: PoseGraph, known: np.ndarray) -> Result:
+    """`egnc.solve` of `graph` (vertex-sorted) with the `known` inliers (`(E,)`, or `(E + K,)`
+    edges then priors) from its odometry composed from the gauge, or from the poses as placed
+    at arrival where odometry does not reach every pose."""
 
     def batch(init: str) -> Result:
         return solve(
             graph,
             settings.method,
-            known_inliers=~robust,
+            known_inliers=known,
             linear_solver=settings.linear_solver,
             options=settings.options,
             gnc_options=settings.gnc_options,

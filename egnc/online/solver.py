@@ -58,6 +58,13 @@ Gauge: the pose of the first `add_prior` is held fixed at the prior's value (as 
 does: the only absolute factor is satisfied exactly at the optimum, whatever its covariance);
 without a prior, the first pose added is held fixed where it was placed.
 
+Measurement priors (`add_pose_prior`, `add_position_prior`: GNSS fixes, pose priors) may come at
+any time (`egnc.online.priors`): candidates, graduated like new loops with their chi-square tests
+at their own dimension, or known inliers (`known_inliers="odometry,priors"`, as `egnc.solve`
+names them). Until they pin the map, the first pose stays held and the map is moved onto the
+fixes as they come (the batch's trimmed fit); the update whose priors pin it moves it once more
+and frees the held pose, unless `add_prior` holds one.
+
 `OnlineSolver` runs the protocol over parts that each do one job: `egnc.online.intake` checks
 what the `add_*` calls give and holds it until the update, `egnc.online.state` is the graph and
 its estimate, `egnc.online.graduation` (over `egnc.online.stage`) graduates an update's loops,
@@ -73,7 +80,7 @@ References:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -81,8 +88,8 @@ from numpy.typing import ArrayLike
 
 from egnc.api import Result
 from egnc.errors import EgncError
-from egnc.graph.checks import check_bool, check_callable
-from egnc.graph.index_sets import sorted_unique
+from egnc.graph.checks import check_bool, check_callable, check_choice
+from egnc.graph.priors import KIND_NAMES
 from egnc.nonlinear.factors import from_matrices
 from egnc.nonlinear.least_squares import NUMERICAL_FAILURE, SolverOptions
 from egnc.online.checkpoint import check_destination, read_state, restore_state, solver_arguments, write_state
@@ -107,8 +114,9 @@ _RESIDUAL_AT_REST = 1e-9
 class OnlineSolver:
     """Robust pose-graph optimization as data arrives (module docstring).
 
-    Use: `add_pose` / `add_odometry` / `add_prior` / `add_loop` (or their batch forms), then
-    `update()`; read `poses`, `inliers` / `rejected` and `result()` at any moment.
+    Use: `add_pose` / `add_odometry` / `add_prior` / `add_loop` / `add_pose_prior` /
+    `add_position_prior` (or their batch forms), then `update()`; read `poses`, `inliers` /
+    `rejected`, `prior_inliers` / `rejected_priors` and `result()` at any moment.
 
     Args:
         dim: 2 (SE(2)) or 3 (SE(3)).
@@ -122,6 +130,10 @@ class OnlineSolver:
         on_update: called with `(solver, report)` at the end of every `update()` (e.g. to record
             it, `egnc.rerun.OnlineRecorder`); also the attribute `on_update`, which a checkpoint
             does not keep.
+        known_inliers: the kinds held quadratic, as `egnc.solve` names them: `"odometry"`
+            (default: measurement priors are candidates, graduated like new loop closures and
+            rejected when they do not fit) or `"odometry,priors"` (priors held quadratic, never
+            rejected). Only the priors' role is set here: an edge's is that of the call adding it.
 
     Raises:
         OptionError: an unknown `dim`, method or backend, or an options argument of the wrong class.
@@ -144,9 +156,10 @@ class OnlineSolver:
         gnc_options: GncOptions | None = None,
         online_options: OnlineOptions | None = None,
         on_update: UpdateCallback | None = None,
+        known_inliers: str | Sequence[str] = "odometry",
     ):
         check_callable("on_update", on_update)
-        settings = Settings.make(dim, method, linear_solver, options, gnc_options, online_options)
+        settings = Settings.make(dim, method, linear_solver, options, gnc_options, online_options, known_inliers)
         self._settings = settings  # shared by every part: the settings below, assigned, apply to all
         self._intake = Intake(settings.dim)  # the add_* calls' entries until the next update
         self._map = MapState(settings)
@@ -175,6 +188,47 @@ class OnlineSolver:
     def add_prior(self, vertex_id: int, pose: ArrayLike) -> None:
         """Hold pose `vertex_id` at `pose` `(P,)`: the gauge of the map (module docstring); one per solver."""
         self._intake.add_prior(vertex_id, pose, self._map.has_prior, self._map)
+
+    def add_pose_prior(
+        self, vertex_id: int, pose: ArrayLike, information: ArrayLike, known_inlier: bool | None = None
+    ) -> int:
+        """Add a measurement of pose `vertex_id` in the world frame; returns its prior index.
+
+        Residual `Log(Z^-1 X)`, as GTSAM's `PriorFactor` (`egnc.graph.priors`). Unlike
+        `add_prior` (the gauge) it may come at any time, as often as wanted, and be rejected.
+
+        Args:
+            vertex_id: a known pose (added before, or in this update).
+            pose: `(P,)` the measured pose in the stored parametrization.
+            information: `(d, d)` information matrix, translation first.
+            known_inlier: hold it quadratic (True) or make it a candidate (False); None: as the
+                solver's `known_inliers` says.
+        """
+        return int(self.add_priors("pose", [vertex_id], one_row(pose), one_row(information), known_inlier)[0])
+
+    def add_position_prior(
+        self, vertex_id: int, position: ArrayLike, information: ArrayLike, known_inlier: bool | None = None
+    ) -> int:
+        """Add a measured position of pose `vertex_id` (a GNSS fix, metres, world frame); returns
+        its prior index. Residual `t - z`, as GTSAM's `GPSFactor`; `information` `(dim, dim)`;
+        the other arguments as for `add_pose_prior`."""
+        return int(self.add_priors("position", [vertex_id], one_row(position), one_row(information), known_inlier)[0])
+
+    def add_priors(
+        self,
+        kind: str,
+        vertex_ids: ArrayLike,
+        values: ArrayLike,
+        information: ArrayLike,
+        known_inlier: bool | None = None,
+    ) -> np.ndarray:
+        """Batch `add_pose_prior` (`kind` `"pose"`: `values` `(K, P)`, `information` `(K, d, d)`)
+        or `add_position_prior` (`"position"`: `(K, dim)`, `(K, dim, dim)`); `vertex_ids` `(K,)`.
+        Returns the prior indices `(K,)`, in the order the priors were added."""
+        code = KIND_NAMES.index(check_choice("prior kind", kind, KIND_NAMES))
+        known = self._settings.priors_known if known_inlier is None else check_bool("known_inlier", known_inlier)
+        first = self._map.num_priors
+        return self._intake.add_measurement_priors(code, vertex_ids, values, information, known, first)
 
     def add_odometry(self, i: int, j: int, measurement: ArrayLike, information: ArrayLike) -> int:
         """Add a known-inlier edge measuring `X_i^-1 X_j`; returns its edge index.
@@ -210,18 +264,18 @@ class OnlineSolver:
         started = time.perf_counter()
         self._log.steps += 1
         state = self._map
-        num_old_edges, num_old_poses = len(state.edges), len(state.vertex_ids)
+        num_old_edges, num_old_poses, num_old_priors = len(state.edges), len(state.vertex_ids), state.num_priors
         prior_moved = state.integrate(self._intake.take())
         new_edges = np.arange(num_old_edges, len(state.edges))
         new_loops = new_edges[state.robust[new_edges]]
-        added = state.factors().subset(new_edges)
-        new_r = added.whitened_norms(added.residuals(state.T))
-        state.grow("r", new_r)
-        moving = new_edges[new_r > _RESIDUAL_AT_REST]
+        new_priors = np.arange(num_old_priors, state.num_priors)
+        new_factors = np.concatenate((new_edges, len(state.edges) + new_priors))  # egnc.online.priors
+        new_candidates = new_factors[state.robust[new_factors]]  # graduated like new loops
+        moving = new_factors[state.r[new_factors] > _RESIDUAL_AT_REST]
         # Without edges there is nothing to solve (a prior has moved the map onto itself already).
-        needs_solve = len(state.edges) > 0 and (prior_moved or len(new_loops) > 0 or len(moving) > 0)
+        needs_solve = len(state.edges) > 0 and (prior_moved or len(new_candidates) > 0 or len(moving) > 0)
         graduating = np.zeros(0, dtype=np.int64)
-        outcome = Graduated((), np.zeros((0, len(new_loops))), np.zeros((0, len(new_loops))), -1)
+        outcome = Graduated((), np.zeros((0, len(new_candidates))), np.zeros((0, len(new_candidates))), -1)
         # New loops alone have moved nothing yet: the map factorized after the last solve holds.
         only_loops = needs_solve and not prior_moved and bool(np.all(state.robust[moving]))
         first = self._arrival.first_stage(new_loops, num_old_poses, num_old_edges) if only_loops else None
@@ -229,14 +283,14 @@ class OnlineSolver:
         if decided:
             state.mu_init[new_loops] = state.mu[new_loops] = 1.0
         elif needs_solve:
-            graduating = self._graduation.loops_to_graduate(new_loops)
-            # A moved gauge moves the whole map; otherwise the change starts at the ends of the new edges.
-            seeds = None if prior_moved else sorted_unique(state.edges[np.concatenate((new_loops, moving))].ravel())
+            graduating = self._graduation.loops_to_graduate(new_candidates)
+            # A moved gauge moves the whole map; otherwise the change starts at the poses of the new factors.
+            seeds = None if prior_moved else state.factor_rows(np.concatenate((new_candidates, moving)))
             # One preconditioner for all stages of the update (one analysis): the edges whose weight
             # is at least trust_weight at its start, the new loops (at mu_init) included, so that CG
             # has only the switched-off loops left to resolve.
             trusted = self._graduation.trusted()
-            outcome = self._graduation.run(graduating, new_loops, seeds, trusted)
+            outcome = self._graduation.run(graduating, new_candidates, seeds, trusted)
             self._graduation.reset_mu_init()
             solved_whole = outcome.whole_map and outcome.status != NUMERICAL_FAILURE
             self._arrival.converged = self._arrival.factorize(trusted) if solved_whole else None
@@ -245,6 +299,7 @@ class OnlineSolver:
             new_poses=len(state.vertex_ids) - num_old_poses,
             new_edges=new_edges,
             new_loops=new_loops,
+            new_priors=new_priors,
             decided_at_arrival=decided,
             graduated=len(graduating),
             stages=outcome.reports,
@@ -329,6 +384,11 @@ class OnlineSolver:
         return len(self._map.edges)
 
     @property
+    def num_priors(self) -> int:
+        """Measurement priors (`add_pose_prior`, `add_position_prior`) taken in by the updates so far."""
+        return self._map.num_priors
+
+    @property
     def steps(self) -> int:
         """Updates run so far."""
         return self._log.steps
@@ -368,28 +428,63 @@ class OnlineSolver:
     @property
     def is_loop_closure(self) -> np.ndarray:
         """`(E,)` bool: edges added as loop closures."""
-        return self._map.robust.copy()
+        return self._map.robust[: self.num_edges].copy()
 
     @property
     def mu(self) -> np.ndarray:
         """`(E,)` current `mu` of each loop closure (nan for odometry)."""
-        return np.where(self._map.robust, self._map.mu, np.nan)
+        return self._per_factor(np.where(self._map.robust, self._map.mu, np.nan), edges=True)
 
     @property
     def residual_norms(self) -> np.ndarray:
         """`(E,)` whitened residual norms `r` at the current estimate."""
-        return self._map.r.copy()
+        return self._per_factor(self._map.r.copy(), edges=True)
 
     @property
     def inliers(self) -> np.ndarray:
         """`(E,)` bool, the decision right now: a loop is out when `r^2 > chi2.ppf(outlier_quantile, d)`
         at the current (robust) estimate. `result()` makes the batch decision instead."""
-        return classify_inliers(self._map.r, self._map.robust, self._settings.d, self.gnc_options)
+        return self._per_factor(self._classified(), edges=True)
 
     @property
     def rejected(self) -> np.ndarray:
         """Indices of the loop closures rejected right now (see `inliers`)."""
         return np.flatnonzero(~self.inliers)
+
+    @property
+    def prior_ids(self) -> np.ndarray:
+        """`(K,)` vertex id each measurement prior measures, in the order they were added."""
+        return self._map.vertex_ids[self._map.priors.rows]
+
+    @property
+    def prior_residual_norms(self) -> np.ndarray:
+        """`(K,)` whitened residual norms of the measurement priors at the current estimate."""
+        return self._per_factor(self._map.r.copy(), edges=False)
+
+    @property
+    def prior_candidates(self) -> np.ndarray:
+        """`(K,)` bool: the measurement priors that may be rejected (not known inliers)."""
+        return self._per_factor(self._map.robust.copy(), edges=False)
+
+    @property
+    def prior_inliers(self) -> np.ndarray:
+        """`(K,)` bool, the decision on the priors right now, as `inliers` on the loops (each at
+        its own dimension: a position prior's is `dim`). Known-inlier priors are always in."""
+        return self._per_factor(self._classified(), edges=False)
+
+    @property
+    def rejected_priors(self) -> np.ndarray:
+        """Prior indices of the measurement priors rejected right now (see `prior_inliers`)."""
+        return np.flatnonzero(~self.prior_inliers)
+
+    def _classified(self) -> np.ndarray:
+        """`(E + K,)` bool, the outlier test of every factor at the current estimate."""
+        state = self._map
+        return classify_inliers(state.r, state.robust, state.dims(np.arange(len(state.r))), self.gnc_options)
+
+    def _per_factor(self, values: np.ndarray, edges: bool) -> np.ndarray:
+        """The edges' `(E,)` (`edges`) or the priors' `(K,)` part of a per-factor array `(E + K,)`."""
+        return values[: self.num_edges] if edges else values[self.num_edges :]
 
     @property
     def update_ms(self) -> np.ndarray:

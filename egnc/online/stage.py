@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from egnc.nonlinear.factors import EdgeErrors
-from egnc.nonlinear.least_squares import SolverOptions, solve_least_squares
+from egnc.nonlinear.least_squares import SolverOptions, SolverResult, solve_least_squares
 from egnc.online.region import LocalProblem
 from egnc.online.state import MapState
 from egnc.robust.gnc import StageReport
@@ -35,7 +35,7 @@ def solve_stage(
     errors: EdgeErrors | None = None,
 ) -> tuple[StageReport, EdgeErrors | None]:
     """One stage at the current `mu`: the whole map (`local` None), or the local problem's
-    poses, written into `state`'s estimate, with `costs` `(E,)`, the whole map's per-edge costs
+    poses, written into `state`'s estimate, with `costs` `(E + K,)`, the whole map's per-factor costs
     (`egnc.online.graduation`), kept current. `trusted`: `(E,)` bool, the preconditioner's
     edges. `errors`: the residuals of the same problem's edges at the poses the stage starts
     from, if known (where the stage before it ended).
@@ -49,11 +49,11 @@ def solve_stage(
         solution = solve_least_squares(
             state.current_problem(), state.T, loss, options, trusted=trusted, errors=errors, keep_errors=True
         )
-        state.T, state.r = solution.poses, solution.residual_norms
+        state.T, state.r = solution.poses, _factor_norms(solution)
         cost = solution.cost
     else:
         assert costs is not None, "a region's stages keep the whole map's costs"
-        edges = local.edges
+        edges = local.factors
         # The stop rule of the whole map's solve: a decrease below rel_cost_tol of the whole cost.
         local_cost, whole_cost = float(np.sum(costs[edges])), float(np.sum(costs))
         # A region is small: one factorization of all its edges beats CG's preconditioner analysis.
@@ -64,10 +64,16 @@ def solve_stage(
         )
         loss = KernelLoss(kernel, state.mu[edges], state.robust[edges])
         solution = solve_least_squares(
-            local.problem, state.T[local.rows], loss, scaled, trusted=trusted[edges], errors=errors, keep_errors=True
+            local.problem,
+            state.T[local.rows],
+            loss,
+            scaled,
+            trusted=trusted[local.edges],
+            errors=errors,
+            keep_errors=True,
         )
         state.T[local.rows] = solution.poses
-        state.r[edges] = solution.residual_norms
+        state.r[edges] = _factor_norms(solution)
         refresh_costs(state, kernel, costs, edges)
         cost = whole_cost - local_cost + solution.cost
     mu_loops = state.mu[state.loops]
@@ -79,12 +85,20 @@ def solve_stage(
         cost=cost,
         time_s=time.perf_counter() - started,
         status=solution.status,
-        active_edges=len(state.edges) if local is None else len(local.edges),
+        active_edges=len(state.r) if local is None else len(local.factors),
         cg_iterations=solution.linear.cg_iterations,
     )
     return report, solution.errors
 
 
+def _factor_norms(solution: SolverResult) -> np.ndarray:
+    """The solve's whitened residual norms per factor: `(E,)` edges, then `(K,)` priors if any."""
+    if solution.prior_norms is None:
+        return solution.residual_norms
+    return np.concatenate((solution.residual_norms, solution.prior_norms))
+
+
 def refresh_costs(state: MapState, kernel: Kernel, costs: np.ndarray, edges: np.ndarray) -> None:
-    """Recompute the per-edge kernel costs `costs` `(E,)` of `edges` at `state`'s current `r` and `mu`."""
+    """Recompute the per-factor kernel costs `costs` `(E + K,)` of `edges` (factor indices) at
+    `state`'s current `r` and `mu`."""
     costs[edges] = KernelLoss(kernel, state.mu[edges], state.robust[edges]).cost(state.r[edges])

@@ -10,16 +10,18 @@ new loop closure that does (the loop is graduated as any other).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from egnc.errors import GraphError
 from egnc.graph import POSE_SIZE, TANGENT_SIZE, PoseGraph
+from egnc.graph.index_sets import sorted_unique
 from egnc.nonlinear.factors import BetweenFactors, from_matrices, group_of, to_matrices
 from egnc.nonlinear.least_squares import Problem
 from egnc.online.intake import Pending
 from egnc.online.options import Settings
+from egnc.online.priors import MapPriors
 from egnc.online.region import LocalProblem
 
 __all__ = ["MapState", "Saved"]
@@ -28,18 +30,18 @@ __all__ = ["MapState", "Saved"]
 @dataclass(frozen=True, eq=False)
 class Saved:
     """The part of the estimate a solve may change, as it was before: a region's pose rows and
-    edges (its solves write into them), or the whole map's arrays (its solves replace them).
+    factors (its solves write into them), or the whole map's arrays (its solves replace them).
 
     Attributes:
         rows: `(M,)` pose rows, or None for every row.
         T: `(M, n, n)` (or `(N, n, n)`) their poses.
-        edges: `(K,)` edges, or None for every edge.
-        r: `(K,)` (or `(E,)`) their whitened residual norms.
+        factors: `(K,)` factor indices (edges, then priors), or None for every factor.
+        r: `(K,)` (or `(E + K,)`) their whitened residual norms.
     """
 
     rows: np.ndarray | None
     T: np.ndarray
-    edges: np.ndarray | None
+    factors: np.ndarray | None
     r: np.ndarray
 
 
@@ -51,12 +53,15 @@ class MapState:
         row: vertex id -> pose row.
         vertex_ids: `(N,)` vertex id of each row.
         T: `(N, n, n)` current estimate; `T_initial` the poses as placed at arrival.
-        gauge: the row held fixed (-1 before the first pose); `has_prior`: whether a prior set it.
+        gauge: the row held fixed (-1 before the first pose); `has_prior`: whether a prior set it;
+            `gauge_free`: whether the measurement priors hold the map instead (`egnc.online.priors`).
         edges: `(E, 2)` pose rows of each edge; `measurements` `(E, P)`, `Z_inv` `(E, n, n)` the
             inverse measured transforms, `information` `(E, d, d)`.
-        robust: `(E,)` bool, loop closures; `loops`: `(L,)` their indices, increasing.
-        mu, mu_init: `(E,)` each loop's current `mu` and the `mu` its next graduation starts from.
-        r: `(E,)` whitened residual norms at the current estimate.
+        priors: the measurement priors (`egnc.online.priors.MapPriors`), `K` of them.
+        robust: `(E + K,)` bool per factor (the edges, then the priors): the candidates, loop
+            closures and priors not known inliers; `loops`: `(L,)` their factor indices, increasing.
+        mu, mu_init: `(E + K,)` each candidate's current `mu` and the `mu` its next graduation starts from.
+        r: `(E + K,)` whitened residual norms at the current estimate.
         problem: the whole map's problem, built when first needed after the graph changed.
         buffers: the arrays `grow` appends to, by attribute name, with room to spare.
     """
@@ -71,6 +76,8 @@ class MapState:
         self.T_initial = np.zeros((0, n, n))
         self.gauge = -1
         self.has_prior = False
+        self.gauge_free = False
+        self.priors = MapPriors(dim)
         self.edges = np.zeros((0, 2), dtype=np.int64)
         self.measurements = np.zeros((0, POSE_SIZE[dim]))
         self.Z_inv = np.zeros((0, n, n))
@@ -85,7 +92,8 @@ class MapState:
         self.buffers: dict[str, np.ndarray] = {}
 
     def integrate(self, pending: Pending) -> bool:
-        """Move the `pending` entries into the graph; place new poses. Returns whether the gauge moved."""
+        """Move the `pending` entries into the graph, place new poses and evaluate the new factors'
+        residuals. Returns whether the map moved (onto a gauge prior or onto the fixes)."""
         if not pending:
             return False
         group, P = group_of(self.dim), POSE_SIZE[self.dim]
@@ -106,21 +114,63 @@ class MapState:
         self.grow("Z_inv", group.inverse(Z))
         d = TANGENT_SIZE[self.dim]
         self.grow("information", np.array(pending.information).reshape(len(rows), d, d))
-        self.grow("robust", robust)
-        self.grow("loops", len(self.robust) - len(robust) + np.flatnonzero(robust))
-        self.grow("mu", np.zeros(len(rows)))
-        self.grow("mu_init", np.zeros(len(rows)))
-        if len(rows) or len(pending.pose_ids):
+        num_old_priors = len(self.priors)
+        new_priors = np.array(pending.prior_known, dtype=bool)
+        if len(new_priors):
+            self.priors.append(
+                np.array([self.row[vertex] for vertex in pending.prior_ids], dtype=np.int64),
+                np.array(pending.prior_kinds, dtype=np.int8),
+                np.array(pending.prior_measurements).reshape(len(new_priors), P),
+                np.array(pending.prior_information).reshape(len(new_priors), d, d),
+            )
+        self._grow_factors("robust", robust, ~new_priors, num_old_priors)
+        if num_old_priors or len(new_priors):  # the priors' indices follow the edges': they moved
+            self.loops = np.flatnonzero(self.robust)
+        else:
+            self.grow("loops", len(self.robust) - len(robust) + np.flatnonzero(robust))
+        for name in ("mu", "mu_init"):
+            self._grow_factors(name, np.zeros(len(rows)), np.zeros(len(new_priors)), num_old_priors)
+        if len(rows) or len(pending.pose_ids) or len(new_priors):
             self.problem = self._factors = None
-        if pending.prior is None:
+        moved = self._move_gauge(pending, len(new_priors) > 0)
+        new_edges = np.arange(len(self.edges) - len(rows), len(self.edges))
+        added = self.factors().subset(new_edges)
+        # A moved map moves every prior's residual; the edges' stay.
+        prior_r = self.priors.residual_norms(self.T)[0 if moved else num_old_priors :]
+        self._grow_factors("r", added.whitened_norms(added.residuals(self.T)), prior_r, 0 if moved else num_old_priors)
+        return moved
+
+    def _move_gauge(self, pending: Pending, new_priors: bool) -> bool:
+        """Move the map onto `pending`'s gauge prior (`OnlineSolver.add_prior`), or onto the
+        measurement priors while they do not pin it yet, freeing the held pose once they do
+        (`egnc.online.priors`). Returns whether the map moved."""
+        if pending.prior is not None:
+            # The prior's pose becomes the gauge: move the map rigidly onto it (relative residuals unchanged).
+            row = self.row[pending.prior[0]]
+            target = to_matrices(self.dim, pending.prior[1])
+            self.T = target @ group_of(self.dim).inverse(self.T[row]) @ self.T
+            self.gauge, self.has_prior, self.gauge_free = row, True, False
+            self.problem = None
+            return True
+        if not new_priors or self.has_prior or self.gauge_free:
             return False
-        # The prior's pose becomes the gauge: move the map rigidly onto it (relative residuals unchanged).
-        row = self.row[pending.prior[0]]
-        target = to_matrices(self.dim, pending.prior[1])
-        self.T = target @ group.inverse(self.T[row]) @ self.T
-        self.gauge, self.has_prior = row, True
+        self.T = self.priors.onto_fixes(self.T)
+        self.gauge_free = self.priors.pin_the_map()
         self.problem = None
         return True
+
+    def _grow_factors(self, name: str, edge_rows: np.ndarray, prior_rows: np.ndarray, kept_priors: int) -> None:
+        """Append to the per-factor array `name` (the `E` edges then the `K` priors) the new edges'
+        `edge_rows` after the edges and `prior_rows` after the first `kept_priors` priors."""
+        current = getattr(self, name)
+        num_edges = len(self.edges) - len(edge_rows)  # before the new ones
+        if len(current) == num_edges:  # no prior yet: grown in place, as the edges are
+            self.grow(name, edge_rows)
+            if len(prior_rows):
+                self.grow(name, prior_rows)
+            return
+        old = (current[:num_edges], edge_rows, current[num_edges : num_edges + kept_priors], prior_rows)
+        setattr(self, name, np.concatenate(old))
 
     def _placed(self, pending: Pending, start: int, rows: np.ndarray, Z: np.ndarray, robust: np.ndarray) -> np.ndarray:
         """`(K, n, n)` the new poses (rows from `start`): explicit values, the others composed
@@ -196,6 +246,32 @@ class MapState:
         buffer[size:grown] = rows
         setattr(self, name, buffer[:grown])
 
+    @property
+    def num_priors(self) -> int:
+        """Measurement priors `K` in the map."""
+        return len(self.priors)
+
+    @property
+    def held(self) -> int:
+        """The pose row solves hold fixed, or -1 when the priors hold the map."""
+        return -1 if self.gauge_free else self.gauge
+
+    def dims(self, factors: np.ndarray) -> int | np.ndarray:
+        """The chi-square dimension of the `factors` `(F,)` (factor indices): `d`, or per factor
+        `(F,)` where the map holds priors (a position prior's is `dim`)."""
+        if not self.num_priors:
+            return self.settings.d
+        dims = np.full(len(factors), self.settings.d)
+        priors = factors >= len(self.edges)
+        dims[priors] = self.priors.dims[factors[priors] - len(self.edges)]
+        return dims
+
+    def factor_rows(self, factors: np.ndarray) -> np.ndarray:
+        """Sorted pose rows the `factors` (factor indices: edges, then priors) measure."""
+        edges = factors[factors < len(self.edges)]
+        prior_rows = self.priors.rows[factors[factors >= len(self.edges)] - len(self.edges)]
+        return sorted_unique(np.concatenate((self.edges[edges].ravel(), prior_rows)))
+
     def factors(self) -> BetweenFactors:
         """The factors of every edge, built when first needed after the graph changed."""
         if self._factors is None:
@@ -207,9 +283,15 @@ class MapState:
         if self.problem is None:
             # Its whole system is solved by CG with the trusted preconditioner; only a fallback factorizes it.
             # Every entry was checked when added: no PoseGraph to check them again.
-            self.problem = Problem.from_factors(
-                self.factors(), self.fixed(len(self.vertex_ids)), self.settings.linear_solver, fill_reducing=False
+            problem = Problem.from_factors(
+                self.factors(),
+                self.fixed(len(self.vertex_ids)),
+                self.settings.linear_solver,
+                fill_reducing=False,
+                priors=self.priors.factors(),
             )
+            # With priors, the loss sees every factor (edges then priors): candidates are weighed.
+            self.problem = replace(problem, weighted_priors=True) if self.num_priors else problem
         return self.problem
 
     def prefix_problem(self, num_poses: int, num_edges: int) -> Problem:
@@ -220,9 +302,11 @@ class MapState:
         return Problem.from_factors(factors, self.fixed(num_poses), self.settings.linear_solver, fill_reducing=False)
 
     def fixed(self, num_poses: int) -> np.ndarray:
-        """`(num_poses,)` bool: the gauge's row (the solver fixes row 0 itself when none is)."""
+        """`(num_poses,)` bool: the gauge's row (the solver fixes row 0 itself when none is and the
+        map holds no prior); none once the priors hold the map."""
         fixed = np.zeros(num_poses, dtype=bool)
-        fixed[self.gauge] = self.gauge != 0
+        if not self.gauge_free:
+            fixed[self.gauge] = self.gauge != 0 or self.num_priors > 0
         return fixed
 
     def graph(self) -> PoseGraph:
@@ -236,18 +320,19 @@ class MapState:
             measurements=self.measurements,
             information=self.information,
             fixed=self.fixed(len(self.vertex_ids)),
+            priors=self.priors.priors(),
         )
 
     def save(self, local: LocalProblem | None) -> Saved:
         """What the stages on `local` (None: the whole map) may change of the estimate (`Saved`)."""
         if local is None:  # whole-map solves replace the arrays, never write into them
             return Saved(None, self.T, None, self.r)
-        return Saved(local.rows, self.T[local.rows], local.edges, self.r[local.edges])
+        return Saved(local.rows, self.T[local.rows], local.factors, self.r[local.factors])
 
     def restore(self, saved: Saved) -> None:
         """Put the estimate back as `saved` holds it."""
-        if saved.rows is None or saved.edges is None:
+        if saved.rows is None or saved.factors is None:
             self.T, self.r = saved.T, saved.r
         else:
             self.T[saved.rows] = saved.T
-            self.r[saved.edges] = saved.r
+            self.r[saved.factors] = saved.r

@@ -362,7 +362,7 @@ def known_inlier_mask(graph: PoseGraph, known_inliers: KnownInliers) -> np.ndarr
     if isinstance(known_inliers, str) or (
         isinstance(known_inliers, (tuple, list)) and all(isinstance(kind, str) for kind in known_inliers)
     ):
-        kinds = _kinds(known_inliers)  # type: ignore[arg-type]
+        kinds = known_inlier_kinds(known_inliers)  # type: ignore[arg-type]
         edges = np.zeros(graph.num_edges, dtype=bool)
         if "odometry" in kinds:
             edges |= graph.is_odometry
@@ -386,8 +386,8 @@ def known_inlier_mask(graph: PoseGraph, known_inliers: KnownInliers) -> np.ndarr
     return mask
 
 
-def _kinds(known_inliers: str | Sequence[str]) -> set[str]:
-    """The kinds named by `known_inliers` (`known_inlier_mask`), checked."""
+def known_inlier_kinds(known_inliers: str | Sequence[str]) -> set[str]:
+    """The kinds named by `known_inliers` (`known_inlier_mask`), checked (`OptionError`)."""
     names = known_inliers.split(",") if isinstance(known_inliers, str) else list(known_inliers)
     kinds = {name.strip() for name in names}
     if kinds == {"none"}:
