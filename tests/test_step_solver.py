@@ -231,6 +231,7 @@ def test_scipy_orders_a_system_at_its_first_factorization_and_solves_it_as_if_bu
 ):
     """SuperLU's block order costs a factorization: a pattern stays in pose-row order until it is
     factorized, and its direct step then equals, bit for bit, that of the pattern built in order."""
+    import egnc.linalg.analysis as analysis
     import egnc.linalg.step_solver as step_solver
 
     graph = corrupted.graph
@@ -241,7 +242,8 @@ def test_scipy_orders_a_system_at_its_first_factorization_and_solves_it_as_if_bu
         orders.append(args)
         return block_order(*args)
 
-    monkeypatch.setattr(step_solver, "block_order", counted_block_order)
+    for module in (step_solver, analysis):  # at analysis, or at the first factorization
+        monkeypatch.setattr(module, "block_order", counted_block_order)
     direct_steps = {}
     for deferred in (False, True):
         monkeypatch.setattr(step_solver, "orders_by_factorizing", lambda name, deferred=deferred: deferred)

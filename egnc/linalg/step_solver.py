@@ -39,22 +39,21 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
 
 from egnc.graph.connectivity import connected_components
+from egnc.linalg.analysis import OnFirstUse, PermutedFactorization
 from egnc.linalg.linear_solvers import (
     Backend,
     Factorization,
     LinearSolver,
     NotPositiveDefiniteError,
-    TriangularFactor,
     block_order,
     lower_triangle_only,
-    make_linear_solver,
     orders_by_factorizing,
 )
 from egnc.linalg.normal_equations import NormalEquationsPattern, block_indices
@@ -96,7 +95,7 @@ def _block_layout(
 ) -> tuple[np.ndarray | None, tuple[int, np.ndarray] | None]:
     """`(block order, in-block order)` of the normal equations of `edges` `(E, 2)`: the
     fill-reducing block order to build the pattern in, or `(num_blocks, (K, 2) block pairs)` for a
-    backend that orders by factorizing (`_InBlockOrder`), or neither (`fill_reducing` False: the
+    backend that orders by factorizing (`InBlockOrder`), or neither (`fill_reducing` False: the
     pattern in pose-row order, which the solver orders itself if it is ever used)."""
     if not fill_reducing:
         return None, None
@@ -110,7 +109,7 @@ def _block_layout(
 def analysed_pattern(
     edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
-    """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`_OnFirstUse`).
+    """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`OnFirstUse`).
 
     Args:
         edges: `(E, 2)` pose rows of the edges.
@@ -120,7 +119,7 @@ def analysed_pattern(
 
     A backend whose block order costs a factorization (`orders_by_factorizing`) gets the pattern
     in pose-row order and computes the block order at its first factorization
-    (`_InBlockOrder`): a robust problem's whole system, false loops included, is often never
+    (`InBlockOrder`): a robust problem's whole system, false loops included, is often never
     factorized (its steps go through the trusted preconditioner).
     """
     return _built(edges, fixed, d, backend, True, *_block_layout(edges, fixed, backend, True))
@@ -137,7 +136,7 @@ def _built(
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
     """The pattern of `edges` in the layout `_block_layout` chose, and its solver."""
     pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=lower_triangle_only(backend), block_order=order)
-    return pattern, _OnFirstUse(backend, pattern, ordered=fill_reducing, in_block_order=in_block_order)
+    return pattern, OnFirstUse(backend, pattern, ordered=fill_reducing, in_block_order=in_block_order)
 
 
 class WholeSystem:
@@ -179,7 +178,7 @@ class WholeSystem:
 
     @property
     def solver(self) -> LinearSolver:
-        """The direct solver of `pattern` (analysed at its first factorization, `_OnFirstUse`)."""
+        """The direct solver of `pattern` (analysed at its first factorization, `OnFirstUse`)."""
         return self._pattern_and_solver()[1]
 
     def _pattern_and_solver(self) -> tuple[NormalEquationsPattern, LinearSolver]:
@@ -188,123 +187,6 @@ class WholeSystem:
                 self._edges, self._fixed, self._d, self._backend, self._fill_reducing, self._order, self._in_block_order
             )
         return self._pattern_solver
-
-
-class _OnFirstUse:
-    """A `LinearSolver` whose symbolic analysis runs at its first factorization.
-
-    A robust problem's full pattern holds every false loop's fill-in, and its steps go through
-    the trusted preconditioner: the full analysis is needed only when a step falls back to the
-    direct solve. On a 100 000-pose grid with 30 % false loops CHOLMOD refuses to analyse it at
-    all ("problem too large": the factor would exceed its integer range).
-    """
-
-    name: str
-
-    def __init__(
-        self,
-        backend: Backend,
-        pattern: NormalEquationsPattern,
-        ordered: bool = True,
-        in_block_order: tuple[int, np.ndarray] | None = None,
-    ):
-        """`ordered`: the pattern is in a fill-reducing order already. `in_block_order`:
-        `(num_blocks, (K, 2) block pairs)` of a pattern in pose-row order to factorize in the
-        backend's block order instead (`_InBlockOrder`)."""
-        self.name = self._backend = backend
-        self._pattern = pattern
-        self._ordered = ordered
-        self._in_block_order = in_block_order
-        self._solver: LinearSolver | None = None
-
-    def _analysed(self) -> LinearSolver:
-        if self._solver is None:
-            pattern = self._pattern
-            if self._in_block_order is not None:
-                self._solver = _InBlockOrder(self._backend, pattern, *self._in_block_order)
-            else:
-                self._solver = make_linear_solver(self.name, pattern.indptr, pattern.indices, ordered=self._ordered)
-        return self._solver
-
-    def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
-        return self._analysed().solve(data, rhs)
-
-    def factorize(self, data: np.ndarray) -> Factorization:
-        """Factorize the matrix with CSC values `data` `(nnz,)`."""
-        return self._analysed().factorize(data)
-
-
-_PERMUTED_COLUMNS = 32
-"""Right-hand-side columns `_InBlockOrder` permutes and solves at once: a whole permuted copy of a
-many-column right-hand side (the marginal covariances') added 16 MiB to the peak of
-manhattanOlson3500's robust solve, and SuperLU solves 32 columns at a time as fast as 192."""
-
-
-class _InBlockOrder:
-    """A `LinearSolver` for a pattern in pose-row order that factorizes it in the backend's block order.
-
-    The order (`block_order`) is computed here, and the pattern permuted into it once: each
-    factorization gathers the values into that pattern, each solve permutes the right-hand side
-    and the solution. The factorization is the one of a pattern built in that order.
-    """
-
-    name: str
-
-    def __init__(self, backend: Backend, pattern: NormalEquationsPattern, num_blocks: int, block_pairs: np.ndarray):
-        """Args:
-        backend: resolved backend (one that stores the whole matrix, not its lower triangle).
-        pattern: the pattern, in pose-row order.
-        num_blocks: number of unknown blocks (free poses).
-        block_pairs: `(K, 2)` block indices joined by an edge.
-        """
-        assert not pattern.lower_only, "a permuted lower triangle is not lower"
-        self.name = backend
-        order = block_order(backend, num_blocks, block_pairs)
-        d = pattern.size // max(num_blocks, 1)
-        self._unknowns = (order[:, None] * d + np.arange(d)).ravel()  # unknown at each ordered position
-        n = pattern.size
-        index = np.int32 if pattern.nnz < 2**31 else np.int64  # halves the transient copies below
-        slot = sp.csc_matrix(
-            (np.arange(pattern.nnz, dtype=index), pattern.indices.astype(index), pattern.indptr.astype(index)),
-            shape=(n, n),
-        )
-        ordered = slot[:, self._unknowns][self._unknowns, :].tocsc()
-        ordered.sort_indices()
-        self._slots = ordered.data  # data slot of each value of the ordered pattern
-        self._solver = make_linear_solver(backend, ordered.indptr, ordered.indices, ordered=True)
-
-    def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
-        return self.factorize(data)(rhs)
-
-    def factorize(self, data: np.ndarray) -> Factorization:
-        """Factorize the matrix with CSC values `data` `(nnz,)` (pose-row order)."""
-        return _PermutedFactorization(self._solver.factorize(data[self._slots]), self._unknowns)
-
-
-class _PermutedFactorization:
-    """The factorization of `A[unknowns][:, unknowns]` as one of `A` (`_InBlockOrder`, a trusted system)."""
-
-    def __init__(self, ordered: Factorization, unknowns: np.ndarray):
-        self._ordered = ordered
-        self._unknowns = unknowns
-
-    def __call__(self, rhs: np.ndarray) -> np.ndarray:
-        unknowns = self._unknowns
-        out = np.empty(rhs.shape)
-        if rhs.ndim == 1:
-            out[unknowns] = self._ordered(rhs[unknowns])
-            return out
-        for start in range(0, rhs.shape[1], _PERMUTED_COLUMNS):
-            columns = slice(start, start + _PERMUTED_COLUMNS)
-            out[unknowns, columns] = self._ordered(rhs[unknowns, columns])
-        return out
-
-    def triangular(self, build: bool = True) -> TriangularFactor | None:
-        """The ordered factor, its elimination order mapped back to `A`'s unknowns (`Factorization.triangular`)."""
-        factor = self._ordered.triangular(build)
-        return None if factor is None else replace(factor, order=self._unknowns[factor.order])
 
 
 @dataclass
@@ -474,7 +356,7 @@ class StepSolver:
             factorization = system.solver.factorize(system.pattern.scatter(products[system.edges])[0])
         except NotPositiveDefiniteError:
             return None
-        return _PermutedFactorization(factorization, system.unknowns)
+        return PermutedFactorization(factorization, system.unknowns)
 
     def _conjugate_gradients(
         self, trusted: _TrustedSystem, shift: np.ndarray, rhs: np.ndarray, tol: float, max_iterations: int
