@@ -24,6 +24,19 @@ the solver's own stopping tests see). If it has not got there in `max_cg_iterati
 one full factorization's time on sphere2500 with 50% false loops), or the trusted edges leave a
 pose unconstrained, the step is solved directly.
 
+A caller may give the trusted set instead (`set_system(trusted=...)`: the online solver keeps one
+set, chosen by weight at the start of an update, over all its stages). An edge outside it whose
+weight has come back to `trust_weight` or more since is then in `H_U` with a weight that is not
+small, and CG slows down. On riSAM's sphere2500 log with 30 % false loops read in GTSAM's
+covariance order, where many loops sit near the outlier line, the CG solves without such edges all
+took fewer than 10 iterations, and those of 50 or more (111 to 200) had about 36 of their 50
+untrusted edges back, 23 at weight 0.5 or more. So a CG solve on a given set that has not
+converged in `WIDEN_AFTER_ITERATIONS` starts again, preconditioned by the given set widened by
+those edges, and so does every later step of the same nonlinear solve that has such edges (one
+more analysis, reused while it holds them). A direct solve instead would cost more on a large
+map: the whole system's factorization, false loops' fill-in included, took 0.4 to 0.9 s on the
+2500-pose map, the trusted edges' alone 35 ms (docs/decisions.md).
+
 The preconditioner's pattern, its fill-reducing order and its symbolic analysis are computed for
 the trusted edges of one linearization, and reused for every later trusted set of the same
 nonlinear solve that the pattern contains (each of its edges enters the preconditioner with its
@@ -65,6 +78,10 @@ _CACHED_TRUSTED_SETS = 2
 Each holds its last factorization: about 170 MiB on a 100 000-pose grid (BENCHMARKS.md, issue 18)."""
 _CACHED_GIVEN_SETS = 4
 """Analyses of given trusted sets kept across solves (`set_system(trusted=...)`)."""
+WIDEN_AFTER_ITERATIONS = 20
+"""CG iterations on a given trusted set after which it is widened by the edges whose weight came
+back (module docstring): a preconditioner that stands for the system needed fewer than 10 per
+step on the benchmark files and on riSAM's sphere2500 logs."""
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -191,12 +208,14 @@ class WholeSystem:
 
 @dataclass
 class LinearStatistics:
-    """Counts over one nonlinear solve: direct solves, CG solves, CG iterations, CG fallbacks."""
+    """Counts over one nonlinear solve: direct solves, CG solves, CG iterations, CG fallbacks, and
+    the steps whose given trusted set was widened by the edges whose weight came back."""
 
     direct_solves: int = 0
     cg_solves: int = 0
     cg_iterations: int = 0
     cg_fallbacks: int = 0
+    widened_steps: int = 0
 
 
 class StepSolver:
@@ -233,6 +252,8 @@ class StepSolver:
         self._trusted: _TrustedSystem | None = None
         self._trusted_data = np.empty(0)
         self._last_direct: Factorization | None = None
+        self._widening: np.ndarray | None = None  # a given set and the edges that came back, to widen it by
+        self._widened = False  # a step of this nonlinear solve widened its given set
 
     def start_solve(self) -> None:
         """Begin a nonlinear solve: reset the statistics and forget the trusted patterns, so that
@@ -241,6 +262,7 @@ class StepSolver:
         whether or not earlier GNC stages were solved)."""
         self.statistics = LinearStatistics()
         self._trusted_systems.clear()
+        self._widened = False
 
     def set_system(
         self,
@@ -262,18 +284,23 @@ class StepSolver:
             method: `"auto"` (CG preconditioned by the trusted edges when some edge is not
                 trusted) or `"direct"`.
             trust_weight: weight from which an edge is trusted (in the preconditioner).
-            trusted: `(E,)` bool, the preconditioner's edges exactly, instead of those chosen by
+            trusted: `(E,)` bool, the preconditioner's edges, instead of those chosen by
                 `trust_weight`: a caller that keeps one set over many linearizations and solves
-                pays one analysis for it (its analysis outlives `start_solve`).
+                pays one analysis for it (its analysis outlives `start_solve`). It is widened by
+                the edges whose weight is at least `trust_weight` where CG needs more than
+                `WIDEN_AFTER_ITERATIONS` (module docstring).
 
         Returns:
             The gradient `g = sum J^T w Omega e` `(n,)` and the diagonal of `H` `(n,)`, summed
             in the same order as `NormalEquationsPattern.scatter` sums them (the same bits).
         """
         self._data = self._products = None
-        self._trusted = None
+        self._trusted = self._widening = None
         if method == "auto" and trusted is not None:
             self._trusted = None if trusted.all() else self._given_system(trusted)
+            came_back = ~trusted & (weights >= trust_weight)
+            if self._trusted is not None and came_back.any():
+                self._widening = trusted | came_back
         elif method == "auto":
             by_weight = weights >= trust_weight
             if not by_weight.all():
@@ -282,8 +309,11 @@ class StepSolver:
             pattern = self.system.pattern
             self._data, gradient = pattern.scatter(products)
             return gradient, self._data[pattern.diagonal_slots]
-        self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
         self._products = products
+        if self._widened and self._widening is not None:  # an earlier step of this solve needed it
+            self._widen()
+        else:
+            self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
         d2 = products.shape[1]
         rows = self._unknowns_of_edges().ravel()
         n = self.system.size
@@ -312,7 +342,7 @@ class StepSolver:
             NotPositiveDefiniteError: the direct factorization failed.
         """
         if self._trusted is not None:
-            step = self._conjugate_gradients(self._trusted, shift, rhs, cg_tol, max_cg_iterations)
+            step = self._preconditioned_step(shift, rhs, cg_tol, max_cg_iterations)
             if step is not None:
                 return step
             self.statistics.cg_fallbacks += 1
@@ -357,6 +387,33 @@ class StepSolver:
         except NotPositiveDefiniteError:
             return None
         return PermutedFactorization(factorization, system.unknowns)
+
+    def _preconditioned_step(
+        self, shift: np.ndarray, rhs: np.ndarray, tol: float, max_iterations: int
+    ) -> np.ndarray | None:
+        """CG on the current trusted system; on a given set with edges to widen it by, the first
+        `WIDEN_AFTER_ITERATIONS` only, then again from `x = 0` on the widened set with the
+        iterations left. None if neither reaches `tol`."""
+        assert self._trusted is not None, "a CG step has a trusted system"
+        if self._widening is None:
+            return self._conjugate_gradients(self._trusted, shift, rhs, tol, max_iterations)
+        spent = self.statistics.cg_iterations
+        step = self._conjugate_gradients(self._trusted, shift, rhs, tol, min(WIDEN_AFTER_ITERATIONS, max_iterations))
+        if step is not None:
+            return step
+        spent = self.statistics.cg_iterations - spent
+        self._widen()
+        return self._conjugate_gradients(self._trusted, shift, rhs, tol, max_iterations - spent)
+
+    def _widen(self) -> None:
+        """Precondition this linearization, and the later ones of the same nonlinear solve, by the
+        given trusted set widened by the edges whose weight came back (`set_system`)."""
+        assert self._widening is not None and self._products is not None, "set_system found edges to widen by"
+        widened = self._trusted_system(self._widening)
+        assert widened is not None, "a superset of a set that preconditions constrains every pose too"
+        self._trusted, self._widening, self._widened = widened, None, True
+        self._trusted_data = widened.pattern.scatter(self._products[widened.edges])[0]
+        self.statistics.widened_steps += 1
 
     def _conjugate_gradients(
         self, trusted: _TrustedSystem, shift: np.ndarray, rhs: np.ndarray, tol: float, max_iterations: int
