@@ -90,7 +90,7 @@ def run_robust(case: dict) -> dict:
     """Corrupt the graph against the saved reference and time the robust solve (the child's side)."""
     import numpy as np
 
-    import egnc.linalg.step_solver
+    import egnc.linalg.analysis
     import egnc.nonlinear.chordal
     from egnc.api import solve
     from egnc.datasets import add_false_loops
@@ -107,7 +107,7 @@ def run_robust(case: dict) -> dict:
 
         return make_counted
 
-    egnc.linalg.step_solver.make_linear_solver = counted(egnc.linalg.step_solver.make_linear_solver)
+    egnc.linalg.analysis.make_linear_solver = counted(egnc.linalg.analysis.make_linear_solver)
     egnc.nonlinear.chordal.make_linear_solver = counted(egnc.nonlinear.chordal.make_linear_solver)
     backend = case["backend"]
     graph = _graph(case)

@@ -4,11 +4,14 @@ the one warning when a log leaves the choice ambiguous."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from test_bench import read_csv
 from test_cli import egnc_solve
 
 from egnc.errors import EgncError, EgncWarning
@@ -133,3 +136,25 @@ def test_cli_option_warning_and_checkpoint_of_another_reading(grid3d, tmp_path):
     assert run.returncode == 1 and "another graph" in run.stderr and "Traceback" not in run.stderr
     run = egnc_solve(DATASETS / "grid3d.g2o", "--irl-covariance-order", "g2o")
     assert run.returncode == 1 and "applies to IRL logs" in run.stderr
+
+
+def test_bench_takes_the_reading_of_an_irl_log(grid3d, tmp_path):
+    """`egnc-bench --irl` reads a converted log the way it is told: the default reading warns (it
+    is the ambiguous one), a chosen one does not, and the option is refused without `--irl`."""
+    path = converter_log(grid3d, tmp_path / "converted.irl")
+    command = [sys.executable, "-m", "egnc.cli.bench", "--irl", str(path), "--methods", "l2", "-q"]
+    runs = {}
+    for order in (None, "g2o", "gtsam"):
+        chosen = [] if order is None else ["--irl-covariance-order", order]
+        out = tmp_path / f"out-{order}"
+        runs[order] = subprocess.run(
+            [*command, *chosen, "--out", str(out)], capture_output=True, text=True, timeout=300
+        )
+        assert runs[order].returncode == 0, runs[order].stderr
+        (row,) = read_csv(out / "results.csv")
+        assert row["status"] == "ok"
+    assert "--irl-covariance-order" in runs[None].stderr
+    assert runs["g2o"].stderr == "" and runs["gtsam"].stderr == ""
+    wrong = [sys.executable, "-m", "egnc.cli.bench", "--datasets", "grid3d", "--irl-covariance-order", "g2o"]
+    run = subprocess.run(wrong, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2 and "applies to --irl logs" in run.stderr

@@ -156,7 +156,7 @@ def test_a_panel_joins_only_columns_whose_rows_continue_each_other(monkeypatch):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_innovations_of_a_problem_in_block_order_are_the_same_on_the_reach(backend, monkeypatch):
-    # SciPy factorizes a problem's pattern in its block order (`_InBlockOrder`): the exposed
+    # SciPy factorizes a problem's pattern in its block order (`egnc.linalg.analysis.InBlockOrder`): the exposed
     # factor's elimination order maps back to the problem's unknowns.
     graph = grid_world(2, 300, seed=5, noise_scale=0.5).graph
     left_out = np.zeros(graph.num_edges, dtype=bool)

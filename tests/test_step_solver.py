@@ -11,8 +11,9 @@ from egnc.errors import OptionError
 from egnc.linalg.linear_solvers import cholmod_available, rslab_available
 from egnc.linalg.normal_equations import edge_products
 from egnc.nonlinear.factors import to_matrices
-from egnc.nonlinear.least_squares import Problem, SolverOptions
+from egnc.nonlinear.least_squares import Problem, SolverOptions, solve_least_squares
 from egnc.robust.kernels import make_kernel
+from egnc.robust.losses import KernelLoss
 
 BACKENDS = [
     "scipy",
@@ -117,6 +118,71 @@ def test_conjugate_gradients_that_stall_fall_back_to_the_direct_solve(corrupted,
     step = steps.solve(shift, gradient, max_cg_iterations=1)
     assert steps.statistics.cg_fallbacks == 1 and steps.statistics.direct_solves == 2
     np.testing.assert_allclose(step, direct, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_given_set_that_leaves_out_edges_whose_weight_came_back_is_widened_by_them(corrupted, backend):
+    """A given trusted set without the heavy loop closures: CG on it stops after
+    `WIDEN_AFTER_ITERATIONS`, starts again on the set widened by every edge at `trust_weight` or
+    more and lands on the direct step; the next linearization of the same solve is widened at once."""
+    from egnc.linalg.step_solver import WIDEN_AFTER_ITERATIONS
+
+    graph = corrupted.graph
+    steps, data, gradient, products, weights, shift, direct = damped_system_and_direct_step(graph, backend)
+    trust = 1e-4
+    given = weights >= trust
+    given[graph.is_loop_closure] = False  # every loop the kernel keeps came back
+    steps.start_solve()
+    steps.set_system(products, weights, "auto", trust_weight=trust, trusted=given)
+    step = steps.solve(shift, gradient)
+    statistics = steps.statistics
+    assert (statistics.widened_steps, statistics.cg_solves, statistics.cg_fallbacks) == (1, 2, 0)
+    assert statistics.cg_iterations > WIDEN_AFTER_ITERATIONS
+    np.testing.assert_allclose(step, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+    analyses, spent = steps.analyses, statistics.cg_iterations
+    steps.set_system(products, weights, "auto", trust_weight=trust, trusted=given)
+    step = steps.solve(shift, gradient)
+    assert statistics.widened_steps == 2 and steps.analyses == analyses  # the widened analysis, reused
+    assert statistics.cg_iterations - spent < WIDEN_AFTER_ITERATIONS
+    np.testing.assert_allclose(step, direct, rtol=0, atol=1e-8 * np.abs(direct).max())
+    steps.start_solve()  # a new solve starts from the given set again
+    steps.set_system(products, weights, "auto", trust_weight=trust, trusted=weights >= trust)
+    steps.solve(shift, gradient)
+    assert steps.statistics.widened_steps == 0
+
+
+def test_a_given_set_on_which_cg_converges_in_time_is_not_widened(corrupted, monkeypatch):
+    """CG that converges within `WIDEN_AFTER_ITERATIONS` on a given set leaving out some returned
+    edges gives the step it gave without the bound, bit for bit."""
+    import egnc.linalg.step_solver as step_solver
+
+    graph = corrupted.graph
+    steps, data, gradient, products, weights, shift, direct = damped_system_and_direct_step(graph, "scipy")
+    given = weights >= 1e-4
+    given[np.flatnonzero(graph.is_loop_closure & given)[:3]] = False
+    results = {}
+    for bound in (step_solver.WIDEN_AFTER_ITERATIONS, 10**6):
+        monkeypatch.setattr(step_solver, "WIDEN_AFTER_ITERATIONS", bound)
+        steps.start_solve()
+        steps.set_system(products, weights, "auto", trusted=given)
+        results[bound] = steps.solve(shift, gradient)
+        assert steps.statistics.widened_steps == 0 and steps.statistics.cg_iterations < 20
+    np.testing.assert_array_equal(*results.values())
+
+
+def test_a_nonlinear_solve_on_a_given_set_that_misses_heavy_edges_ends_where_the_direct_one_does(corrupted):
+    """The online solver's case: one trusted set for a whole solve. Left without the loops the
+    kernel keeps, the solve widens it and ends at the direct solve's poses, and says so."""
+    graph = corrupted.graph
+    problem = Problem.from_graph(graph, "scipy")
+    loss = KernelLoss(make_kernel("gm", c=3.0), np.ones(graph.num_edges), graph.is_loop_closure)
+    poses = to_matrices(graph.dim, graph.poses)
+    given = ~graph.is_loop_closure
+    direct = solve_least_squares(problem, poses, loss, SolverOptions(linear_method="direct"))
+    widened = solve_least_squares(problem, poses, loss, SolverOptions(), trusted=given)
+    assert widened.linear.widened_steps >= 1 and widened.linear.cg_fallbacks == 0
+    assert widened.iterations == direct.iterations
+    np.testing.assert_allclose(widened.poses, direct.poses, rtol=0, atol=1e-8)
 
 
 def test_trusted_edges_that_leave_a_pose_loose_are_not_a_preconditioner(corrupted):
@@ -231,6 +297,7 @@ def test_scipy_orders_a_system_at_its_first_factorization_and_solves_it_as_if_bu
 ):
     """SuperLU's block order costs a factorization: a pattern stays in pose-row order until it is
     factorized, and its direct step then equals, bit for bit, that of the pattern built in order."""
+    import egnc.linalg.analysis as analysis
     import egnc.linalg.step_solver as step_solver
 
     graph = corrupted.graph
@@ -241,7 +308,8 @@ def test_scipy_orders_a_system_at_its_first_factorization_and_solves_it_as_if_bu
         orders.append(args)
         return block_order(*args)
 
-    monkeypatch.setattr(step_solver, "block_order", counted_block_order)
+    for module in (step_solver, analysis):  # at analysis, or at the first factorization
+        monkeypatch.setattr(module, "block_order", counted_block_order)
     direct_steps = {}
     for deferred in (False, True):
         monkeypatch.setattr(step_solver, "orders_by_factorizing", lambda name, deferred=deferred: deferred)

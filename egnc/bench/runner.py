@@ -34,6 +34,7 @@ from egnc.bench.runs import RunRecord, describe_run, record_run, solve_and_score
 from egnc.errors import EgncError
 from egnc.graph import PoseGraph
 from egnc.io import read_g2o, read_irl
+from egnc.io.irl_covariance import CovarianceOrder
 
 __all__ = ["Progress", "run_case", "run_grid", "run_irl"]
 
@@ -130,11 +131,13 @@ def run_irl(
     progress: Progress | None = None,
     workers: int = 1,
     dask_scheduler: str | None = None,
+    covariance_order: CovarianceOrder | None = None,
 ) -> list[RunRecord]:
     """Run every method on an IRL log scored against its own labels (no corruption; see
-    `egnc.bench.cases.irl_case`); the other arguments as in `run_grid`."""
+    `egnc.bench.cases.irl_case`); `covariance_order`: how a 3D log's covariances are read
+    (`egnc.io.read_irl`); the other arguments as in `run_grid`."""
     specs = _specs(methods, progress)
-    log = read_irl(path)
+    log = read_irl(path, covariance_order)
     name = Path(path).stem
     counter = _Counter(len(specs), progress)
     with open_pool(workers, dask_scheduler) as pool:

@@ -1,4 +1,4 @@
-"""Argument types shared by the command-line entry points: a bad value is a usage error (exit 2)."""
+"""Argument types and arguments shared by the command-line entry points: a bad value is a usage error (exit 2)."""
 
 from __future__ import annotations
 
@@ -42,3 +42,13 @@ def share(text: str) -> float:
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"expected a number from 0 to 1, got {text!r}")
     return value
+
+
+def add_irl_covariance_order(parser: argparse.ArgumentParser) -> None:
+    """Add `--irl-covariance-order` (`egnc.io.read_irl`'s `covariance_order`; None: its default)."""
+    parser.add_argument(
+        "--irl-covariance-order",
+        choices=("gtsam", "g2o"),
+        help="order of a 3D IRL log's covariances: gtsam (rx ry rz x y z, riSAM's reader; the default) or g2o"
+        " (x y z rx ry rz, what riSAM's g2o-2-irl writes for g2o files such as sphere2500; docs/online.md)",
+    )

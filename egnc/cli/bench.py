@@ -28,7 +28,7 @@ from egnc.bench import (
     summarize,
     write_outputs,
 )
-from egnc.cli.arguments import int_at_least, positive_float
+from egnc.cli.arguments import add_irl_covariance_order, int_at_least, positive_float
 from egnc.datasets import OUTLIER_RULES, VARIANTS
 from egnc.errors import EgncError
 from egnc.linalg.linear_solvers import LINEAR_SOLVERS
@@ -40,6 +40,7 @@ EXAMPLES = f"""examples:
   egnc-bench --datasets csail,intel --percent 10,30 --seeds 1,2,3 --dask-scheduler tcp://127.0.0.1:8786
   egnc-bench --datasets datasets/grid2d.g2o --methods "egnc,egnc[threshold=distance],risam[c=2]"
   egnc-bench --irl ../shared/datasets/manhattan_noisy.irl --methods egnc,risam,gtsam-gnc-tls
+  egnc-bench --irl sphere2500_30_random_0.irl --irl-covariance-order g2o --methods egnc,risam
 
 Method specs: any egnc method (egnc, risam, gnc-gm, gnc-tls, huber, cauchy, gm, l2), optionally
 with GncOptions overrides in brackets (egnc[threshold=distance], risam[c=2,refine=false]), and the
@@ -76,6 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=Path("../shared/datasets"),
         help="where dataset names are looked up (default ../shared/datasets)",
     )
+    add_irl_covariance_order(parser)
     parser.add_argument(
         "--percent", type=_floats, help=f"outlier percentages among loop closures (default {DEFAULT_PERCENTS})"
     )
@@ -171,6 +173,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.irl is not None and (args.percent is not None or args.seeds is not None):
         parser.error("--percent and --seeds apply to --datasets, not to --irl (an IRL log carries its own labels)")
+    if args.irl is None and args.irl_covariance_order is not None:
+        parser.error("--irl-covariance-order applies to --irl logs, not to --datasets")
     if args.workers is not None and args.dask_scheduler is not None:
         parser.error("--workers and --dask-scheduler exclude each other (the cluster has its own workers)")
     pool = {"workers": args.workers or 1, "dask_scheduler": args.dask_scheduler}
@@ -189,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                 time_limit_s=args.time_limit,
                 linear_solver=args.linear_solver,
                 progress=progress,
+                covariance_order=args.irl_covariance_order,
                 **pool,
             )
         else:

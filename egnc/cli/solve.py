@@ -26,7 +26,7 @@ import numpy as np
 
 from egnc import __version__
 from egnc.api import INITIALIZATIONS, METHODS, Result, solve
-from egnc.cli.arguments import int_at_least, positive_float, share
+from egnc.cli.arguments import add_irl_covariance_order, int_at_least, positive_float, share
 from egnc.cli.outputs import OutputPlan
 from egnc.cli.progress import Progress, StepProgress
 from egnc.cli.report import report_dict, summary
@@ -123,12 +123,7 @@ def _add_problem_arguments(parser: argparse.ArgumentParser) -> None:
         help="information matrices that are not positive definite: strict (default) refuses the file,"
         " nearest-pd clips their eigenvalues, diagonal keeps their diagonal (one warning with the count)",
     )
-    parser.add_argument(
-        "--irl-covariance-order",
-        choices=("gtsam", "g2o"),
-        help="order of a 3D IRL log's covariances: gtsam (rx ry rz x y z, riSAM's reader; the default) or g2o"
-        " (x y z rx ry rz, what riSAM's g2o-2-irl writes for g2o files such as sphere2500; docs/online.md)",
-    )
+    add_irl_covariance_order(parser)
     parser.add_argument(
         "--drop-outliers", action="store_true", help="write the output graph without the rejected loop closures"
     )

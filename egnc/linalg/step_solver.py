@@ -24,6 +24,19 @@ the solver's own stopping tests see). If it has not got there in `max_cg_iterati
 one full factorization's time on sphere2500 with 50% false loops), or the trusted edges leave a
 pose unconstrained, the step is solved directly.
 
+A caller may give the trusted set instead (`set_system(trusted=...)`: the online solver keeps one
+set, chosen by weight at the start of an update, over all its stages). An edge outside it whose
+weight has come back to `trust_weight` or more since is then in `H_U` with a weight that is not
+small, and CG slows down. On riSAM's sphere2500 log with 30 % false loops read in GTSAM's
+covariance order, where many loops sit near the outlier line, the CG solves without such edges all
+took fewer than 10 iterations, and those of 50 or more (111 to 200) had about 36 of their 50
+untrusted edges back, 23 at weight 0.5 or more. So a CG solve on a given set that has not
+converged in `WIDEN_AFTER_ITERATIONS` starts again, preconditioned by the given set widened by
+those edges, and so does every later step of the same nonlinear solve that has such edges (one
+more analysis, reused while it holds them). A direct solve instead would cost more on a large
+map: the whole system's factorization, false loops' fill-in included, took 0.4 to 0.9 s on the
+2500-pose map, the trusted edges' alone 35 ms (docs/decisions.md).
+
 The preconditioner's pattern, its fill-reducing order and its symbolic analysis are computed for
 the trusted edges of one linearization, and reused for every later trusted set of the same
 nonlinear solve that the pattern contains (each of its edges enters the preconditioner with its
@@ -39,22 +52,21 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
 
 from egnc.graph.connectivity import connected_components
+from egnc.linalg.analysis import OnFirstUse, PermutedFactorization
 from egnc.linalg.linear_solvers import (
     Backend,
     Factorization,
     LinearSolver,
     NotPositiveDefiniteError,
-    TriangularFactor,
     block_order,
     lower_triangle_only,
-    make_linear_solver,
     orders_by_factorizing,
 )
 from egnc.linalg.normal_equations import NormalEquationsPattern, block_indices
@@ -66,6 +78,14 @@ _CACHED_TRUSTED_SETS = 2
 Each holds its last factorization: about 170 MiB on a 100 000-pose grid (BENCHMARKS.md, issue 18)."""
 _CACHED_GIVEN_SETS = 4
 """Analyses of given trusted sets kept across solves (`set_system(trusted=...)`)."""
+WIDEN_AFTER_ITERATIONS = 30
+"""CG iterations on a given trusted set after which it is widened by the edges whose weight came
+back (module docstring): about what the widening costs, so that a solve pays at most twice what
+the better of the two would have (as in renting until the rent equals the price). On the
+2500-pose sphere the analysis and first factorization of the trusted system took 150 ms and a
+preconditioned iteration 5 ms; a preconditioner that stands for the system needed fewer than 10
+iterations per step on the benchmark files and on riSAM's sphere2500 logs. At 20, stages that
+needed 22 to 30 iterations were widened, and riSAM's 30 % log read the GTSAM way did not get faster."""
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> float:
@@ -96,7 +116,7 @@ def _block_layout(
 ) -> tuple[np.ndarray | None, tuple[int, np.ndarray] | None]:
     """`(block order, in-block order)` of the normal equations of `edges` `(E, 2)`: the
     fill-reducing block order to build the pattern in, or `(num_blocks, (K, 2) block pairs)` for a
-    backend that orders by factorizing (`_InBlockOrder`), or neither (`fill_reducing` False: the
+    backend that orders by factorizing (`InBlockOrder`), or neither (`fill_reducing` False: the
     pattern in pose-row order, which the solver orders itself if it is ever used)."""
     if not fill_reducing:
         return None, None
@@ -110,7 +130,7 @@ def _block_layout(
 def analysed_pattern(
     edges: np.ndarray, fixed: np.ndarray, d: int, backend: Backend
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
-    """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`_OnFirstUse`).
+    """The normal-equations pattern of `edges` `(E, 2)` in a fill-reducing block order, and its solver (`OnFirstUse`).
 
     Args:
         edges: `(E, 2)` pose rows of the edges.
@@ -120,7 +140,7 @@ def analysed_pattern(
 
     A backend whose block order costs a factorization (`orders_by_factorizing`) gets the pattern
     in pose-row order and computes the block order at its first factorization
-    (`_InBlockOrder`): a robust problem's whole system, false loops included, is often never
+    (`InBlockOrder`): a robust problem's whole system, false loops included, is often never
     factorized (its steps go through the trusted preconditioner).
     """
     return _built(edges, fixed, d, backend, True, *_block_layout(edges, fixed, backend, True))
@@ -137,7 +157,7 @@ def _built(
 ) -> tuple[NormalEquationsPattern, LinearSolver]:
     """The pattern of `edges` in the layout `_block_layout` chose, and its solver."""
     pattern = NormalEquationsPattern.build(edges, fixed, d, lower_only=lower_triangle_only(backend), block_order=order)
-    return pattern, _OnFirstUse(backend, pattern, ordered=fill_reducing, in_block_order=in_block_order)
+    return pattern, OnFirstUse(backend, pattern, ordered=fill_reducing, in_block_order=in_block_order)
 
 
 class WholeSystem:
@@ -179,7 +199,7 @@ class WholeSystem:
 
     @property
     def solver(self) -> LinearSolver:
-        """The direct solver of `pattern` (analysed at its first factorization, `_OnFirstUse`)."""
+        """The direct solver of `pattern` (analysed at its first factorization, `OnFirstUse`)."""
         return self._pattern_and_solver()[1]
 
     def _pattern_and_solver(self) -> tuple[NormalEquationsPattern, LinearSolver]:
@@ -190,131 +210,16 @@ class WholeSystem:
         return self._pattern_solver
 
 
-class _OnFirstUse:
-    """A `LinearSolver` whose symbolic analysis runs at its first factorization.
-
-    A robust problem's full pattern holds every false loop's fill-in, and its steps go through
-    the trusted preconditioner: the full analysis is needed only when a step falls back to the
-    direct solve. On a 100 000-pose grid with 30 % false loops CHOLMOD refuses to analyse it at
-    all ("problem too large": the factor would exceed its integer range).
-    """
-
-    name: str
-
-    def __init__(
-        self,
-        backend: Backend,
-        pattern: NormalEquationsPattern,
-        ordered: bool = True,
-        in_block_order: tuple[int, np.ndarray] | None = None,
-    ):
-        """`ordered`: the pattern is in a fill-reducing order already. `in_block_order`:
-        `(num_blocks, (K, 2) block pairs)` of a pattern in pose-row order to factorize in the
-        backend's block order instead (`_InBlockOrder`)."""
-        self.name = self._backend = backend
-        self._pattern = pattern
-        self._ordered = ordered
-        self._in_block_order = in_block_order
-        self._solver: LinearSolver | None = None
-
-    def _analysed(self) -> LinearSolver:
-        if self._solver is None:
-            pattern = self._pattern
-            if self._in_block_order is not None:
-                self._solver = _InBlockOrder(self._backend, pattern, *self._in_block_order)
-            else:
-                self._solver = make_linear_solver(self.name, pattern.indptr, pattern.indices, ordered=self._ordered)
-        return self._solver
-
-    def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
-        return self._analysed().solve(data, rhs)
-
-    def factorize(self, data: np.ndarray) -> Factorization:
-        """Factorize the matrix with CSC values `data` `(nnz,)`."""
-        return self._analysed().factorize(data)
-
-
-_PERMUTED_COLUMNS = 32
-"""Right-hand-side columns `_InBlockOrder` permutes and solves at once: a whole permuted copy of a
-many-column right-hand side (the marginal covariances') added 16 MiB to the peak of
-manhattanOlson3500's robust solve, and SuperLU solves 32 columns at a time as fast as 192."""
-
-
-class _InBlockOrder:
-    """A `LinearSolver` for a pattern in pose-row order that factorizes it in the backend's block order.
-
-    The order (`block_order`) is computed here, and the pattern permuted into it once: each
-    factorization gathers the values into that pattern, each solve permutes the right-hand side
-    and the solution. The factorization is the one of a pattern built in that order.
-    """
-
-    name: str
-
-    def __init__(self, backend: Backend, pattern: NormalEquationsPattern, num_blocks: int, block_pairs: np.ndarray):
-        """Args:
-        backend: resolved backend (one that stores the whole matrix, not its lower triangle).
-        pattern: the pattern, in pose-row order.
-        num_blocks: number of unknown blocks (free poses).
-        block_pairs: `(K, 2)` block indices joined by an edge.
-        """
-        assert not pattern.lower_only, "a permuted lower triangle is not lower"
-        self.name = backend
-        order = block_order(backend, num_blocks, block_pairs)
-        d = pattern.size // max(num_blocks, 1)
-        self._unknowns = (order[:, None] * d + np.arange(d)).ravel()  # unknown at each ordered position
-        n = pattern.size
-        index = np.int32 if pattern.nnz < 2**31 else np.int64  # halves the transient copies below
-        slot = sp.csc_matrix(
-            (np.arange(pattern.nnz, dtype=index), pattern.indices.astype(index), pattern.indptr.astype(index)),
-            shape=(n, n),
-        )
-        ordered = slot[:, self._unknowns][self._unknowns, :].tocsc()
-        ordered.sort_indices()
-        self._slots = ordered.data  # data slot of each value of the ordered pattern
-        self._solver = make_linear_solver(backend, ordered.indptr, ordered.indices, ordered=True)
-
-    def solve(self, data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        """Factorize the matrix with CSC values `data` `(nnz,)` and return `x` `(n,)`."""
-        return self.factorize(data)(rhs)
-
-    def factorize(self, data: np.ndarray) -> Factorization:
-        """Factorize the matrix with CSC values `data` `(nnz,)` (pose-row order)."""
-        return _PermutedFactorization(self._solver.factorize(data[self._slots]), self._unknowns)
-
-
-class _PermutedFactorization:
-    """The factorization of `A[unknowns][:, unknowns]` as one of `A` (`_InBlockOrder`, a trusted system)."""
-
-    def __init__(self, ordered: Factorization, unknowns: np.ndarray):
-        self._ordered = ordered
-        self._unknowns = unknowns
-
-    def __call__(self, rhs: np.ndarray) -> np.ndarray:
-        unknowns = self._unknowns
-        out = np.empty(rhs.shape)
-        if rhs.ndim == 1:
-            out[unknowns] = self._ordered(rhs[unknowns])
-            return out
-        for start in range(0, rhs.shape[1], _PERMUTED_COLUMNS):
-            columns = slice(start, start + _PERMUTED_COLUMNS)
-            out[unknowns, columns] = self._ordered(rhs[unknowns, columns])
-        return out
-
-    def triangular(self, build: bool = True) -> TriangularFactor | None:
-        """The ordered factor, its elimination order mapped back to `A`'s unknowns (`Factorization.triangular`)."""
-        factor = self._ordered.triangular(build)
-        return None if factor is None else replace(factor, order=self._unknowns[factor.order])
-
-
 @dataclass
 class LinearStatistics:
-    """Counts over one nonlinear solve: direct solves, CG solves, CG iterations, CG fallbacks."""
+    """Counts over one nonlinear solve: direct solves, CG solves, CG iterations, CG fallbacks, and
+    the steps whose given trusted set was widened by the edges whose weight came back."""
 
     direct_solves: int = 0
     cg_solves: int = 0
     cg_iterations: int = 0
     cg_fallbacks: int = 0
+    widened_steps: int = 0
 
 
 class StepSolver:
@@ -351,6 +256,8 @@ class StepSolver:
         self._trusted: _TrustedSystem | None = None
         self._trusted_data = np.empty(0)
         self._last_direct: Factorization | None = None
+        self._widening: np.ndarray | None = None  # a given set and the edges that came back, to widen it by
+        self._widened = False  # a step of this nonlinear solve widened its given set
 
     def start_solve(self) -> None:
         """Begin a nonlinear solve: reset the statistics and forget the trusted patterns, so that
@@ -359,6 +266,7 @@ class StepSolver:
         whether or not earlier GNC stages were solved)."""
         self.statistics = LinearStatistics()
         self._trusted_systems.clear()
+        self._widened = False
 
     def set_system(
         self,
@@ -380,18 +288,23 @@ class StepSolver:
             method: `"auto"` (CG preconditioned by the trusted edges when some edge is not
                 trusted) or `"direct"`.
             trust_weight: weight from which an edge is trusted (in the preconditioner).
-            trusted: `(E,)` bool, the preconditioner's edges exactly, instead of those chosen by
+            trusted: `(E,)` bool, the preconditioner's edges, instead of those chosen by
                 `trust_weight`: a caller that keeps one set over many linearizations and solves
-                pays one analysis for it (its analysis outlives `start_solve`).
+                pays one analysis for it (its analysis outlives `start_solve`). It is widened by
+                the edges whose weight is at least `trust_weight` where CG needs more than
+                `WIDEN_AFTER_ITERATIONS` (module docstring).
 
         Returns:
             The gradient `g = sum J^T w Omega e` `(n,)` and the diagonal of `H` `(n,)`, summed
             in the same order as `NormalEquationsPattern.scatter` sums them (the same bits).
         """
         self._data = self._products = None
-        self._trusted = None
+        self._trusted = self._widening = None
         if method == "auto" and trusted is not None:
             self._trusted = None if trusted.all() else self._given_system(trusted)
+            came_back = ~trusted & (weights >= trust_weight)
+            if self._trusted is not None and came_back.any():
+                self._widening = trusted | came_back
         elif method == "auto":
             by_weight = weights >= trust_weight
             if not by_weight.all():
@@ -400,8 +313,11 @@ class StepSolver:
             pattern = self.system.pattern
             self._data, gradient = pattern.scatter(products)
             return gradient, self._data[pattern.diagonal_slots]
-        self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
         self._products = products
+        if self._widened and self._widening is not None:  # an earlier step of this solve needed it
+            self._widen()
+        else:
+            self._trusted_data = self._trusted.pattern.scatter(products[self._trusted.edges])[0]
         d2 = products.shape[1]
         rows = self._unknowns_of_edges().ravel()
         n = self.system.size
@@ -430,7 +346,7 @@ class StepSolver:
             NotPositiveDefiniteError: the direct factorization failed.
         """
         if self._trusted is not None:
-            step = self._conjugate_gradients(self._trusted, shift, rhs, cg_tol, max_cg_iterations)
+            step = self._preconditioned_step(shift, rhs, cg_tol, max_cg_iterations)
             if step is not None:
                 return step
             self.statistics.cg_fallbacks += 1
@@ -474,7 +390,34 @@ class StepSolver:
             factorization = system.solver.factorize(system.pattern.scatter(products[system.edges])[0])
         except NotPositiveDefiniteError:
             return None
-        return _PermutedFactorization(factorization, system.unknowns)
+        return PermutedFactorization(factorization, system.unknowns)
+
+    def _preconditioned_step(
+        self, shift: np.ndarray, rhs: np.ndarray, tol: float, max_iterations: int
+    ) -> np.ndarray | None:
+        """CG on the current trusted system; on a given set with edges to widen it by, the first
+        `WIDEN_AFTER_ITERATIONS` only, then again from `x = 0` on the widened set with the
+        iterations left. None if neither reaches `tol`."""
+        assert self._trusted is not None, "a CG step has a trusted system"
+        if self._widening is None:
+            return self._conjugate_gradients(self._trusted, shift, rhs, tol, max_iterations)
+        spent = self.statistics.cg_iterations
+        step = self._conjugate_gradients(self._trusted, shift, rhs, tol, min(WIDEN_AFTER_ITERATIONS, max_iterations))
+        if step is not None:
+            return step
+        spent = self.statistics.cg_iterations - spent
+        self._widen()
+        return self._conjugate_gradients(self._trusted, shift, rhs, tol, max_iterations - spent)
+
+    def _widen(self) -> None:
+        """Precondition this linearization, and the later ones of the same nonlinear solve, by the
+        given trusted set widened by the edges whose weight came back (`set_system`)."""
+        assert self._widening is not None and self._products is not None, "set_system found edges to widen by"
+        widened = self._trusted_system(self._widening)
+        assert widened is not None, "a superset of a set that preconditions constrains every pose too"
+        self._trusted, self._widening, self._widened = widened, None, True
+        self._trusted_data = widened.pattern.scatter(self._products[widened.edges])[0]
+        self.statistics.widened_steps += 1
 
     def _conjugate_gradients(
         self, trusted: _TrustedSystem, shift: np.ndarray, rhs: np.ndarray, tol: float, max_iterations: int
