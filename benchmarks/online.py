@@ -32,7 +32,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from _lib.cli import with_default_command
+from _lib.cli import add_gnss_case_arguments, with_default_command
 
 COMMANDS = ("replay", "gnss", "isam2", "vs-isam2")
 
@@ -64,12 +64,7 @@ def parser() -> argparse.ArgumentParser:
     replay.add_argument("--json", type=Path, help="append one JSON line per row here")
 
     gnss = commands.add_parser("gnss", help="GNSS fixes with multipath outliers and false loops, replayed online")
-    gnss.add_argument("--files", default="manhattanOlson3500,sphere2500,city10000")
-    gnss.add_argument("--loops", default="0,10,30", help="false-loop shares, percent")
-    gnss.add_argument("--priors", default="0,10,20", help="multipath shares of the fixes, percent")
-    gnss.add_argument("--every", type=int, default=10, help="a fix every K poses")
-    gnss.add_argument("--sigma", type=float, default=2.0, help="fix noise per coordinate, metres")
-    gnss.add_argument("--seed", type=int, default=1)
+    add_gnss_case_arguments(gnss)
     gnss.add_argument("--baseline", action="store_true", help="also replay each graph without its fixes (time ratio)")
     gnss.add_argument("--json", type=Path, help="append one JSON line per row here")
 

@@ -35,7 +35,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from _lib.cli import command_echo
+from _lib.cli import add_gnss_case_arguments, command_echo
 from _lib.paths import SHARED_DATASETS
 
 CLEAN_FILES = (
@@ -85,12 +85,7 @@ def parser() -> argparse.ArgumentParser:
     bridge.add_argument("--no-robots", action="store_true", help="only the shared-file table")
 
     gnss = commands.add_parser("gnss", help="GNSS fixes with multipath outliers and false loops, egnc and GTSAM")
-    gnss.add_argument("--files", default="manhattanOlson3500,sphere2500,city10000")
-    gnss.add_argument("--loops", default="0,10,30", help="false-loop shares, percent")
-    gnss.add_argument("--priors", default="0,10,20", help="multipath shares of the fixes, percent")
-    gnss.add_argument("--every", type=int, default=10, help="a fix every K poses")
-    gnss.add_argument("--sigma", type=float, default=2.0, help="fix noise per coordinate, metres")
-    gnss.add_argument("--seed", type=int, default=1)
+    add_gnss_case_arguments(gnss)
     gnss.add_argument(
         "--guess", default="file", help="'file', or drifted KIND:LEVEL (heading:0.3 rad a step, scaled:10 sigmas)"
     )
