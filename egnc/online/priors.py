@@ -87,9 +87,11 @@ class MapPriors:
         """`(N, n, n)` poses `T` moved rigidly onto the priors' positions (the trimmed fit)."""
         return frame_motion(self.priors(), T[self.rows, : self.dim, self.dim]) @ T
 
-    def residual_norms(self, T: np.ndarray) -> np.ndarray:
-        """`(K,)` whitened residual norms of the priors at poses `T` `(N, n, n)`."""
+    def residual_norms(self, T: np.ndarray, first: int = 0) -> np.ndarray:
+        """`(K - first,)` whitened residual norms of the priors from index `first` on, at poses `T` `(N, n, n)`."""
         factors = self.factors()
-        if factors is None:
+        if factors is None or first >= len(self):
             return np.zeros(0)
+        if first:
+            factors = factors.subset(np.arange(first, len(self)))
         return factors.whitened_norms(factors.residuals(T))

@@ -136,8 +136,9 @@ class MapState:
         new_edges = np.arange(len(self.edges) - len(rows), len(self.edges))
         added = self.factors().subset(new_edges)
         # A moved map moves every prior's residual; the edges' stay.
-        prior_r = self.priors.residual_norms(self.T)[0 if moved else num_old_priors :]
-        self._grow_factors("r", added.whitened_norms(added.residuals(self.T)), prior_r, 0 if moved else num_old_priors)
+        kept_priors = 0 if moved else num_old_priors
+        prior_r = self.priors.residual_norms(self.T, first=kept_priors)
+        self._grow_factors("r", added.whitened_norms(added.residuals(self.T)), prior_r, kept_priors)
         return moved
 
     def _move_gauge(self, pending: Pending, new_priors: bool) -> bool:
